@@ -1,0 +1,1 @@
+"""Benchmarks reproducing the PCC paper."""
