@@ -1,0 +1,440 @@
+"""Training objectives of PCC, E2C and RCE, one function per method, selected by name.
+
+Notation (per transition ``(x_t, u_t, x_{t+1})``; every term is summed over its dimensions and
+averaged over the batch):
+
+* ``E(z | x)``: encoder, diagonal Gaussian ``N(mu(x), diag(sigma^2(x)))``.
+* ``F(z' | z, u)``: latent transition with mean ``f(z, u)``.
+* ``D(x | z)``: Bernoulli decoder.
+* ``Q(z_t | z_hat_{t+1}, x_t, u_t)``: backward model (recognition of z_t).
+* ``z_hat_{t+1} ~ E(. | x_{t+1})`` (the paper's ``Q(z_hat_{t+1} | x_{t+1})``, shared with the
+  encoder), ``z_t ~ Q(. | z_hat_{t+1}, x_t, u_t)``.
+
+Every loss has the signature ``loss(model, batch, config, generator=None) -> (loss, metrics)``
+where ``batch`` is a :class:`TransitionBatch`, ``config`` a
+:class:`pcc_agent.presets.TrainConfig`, ``generator`` the ``torch.Generator`` all noise is drawn
+from, and ``metrics`` maps term names to Python floats.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import NamedTuple, Protocol
+
+import torch
+from torch.func import jvp
+
+from pcc_agent.distributions import (
+    bernoulli_log_likelihood,
+    gaussian_entropy,
+    gaussian_kl,
+    gaussian_kl_standard,
+    gaussian_log_prob,
+    gaussian_rsample,
+)
+from pcc_agent.model import EmbeddingModel
+from pcc_agent.networks import E2CTransition, to_float_image
+from pcc_agent.presets import ModelConfig, TrainConfig
+
+Metrics = dict[str, float]
+
+
+class TransitionBatch(NamedTuple):
+    """A mini-batch of transitions.
+
+    Attributes:
+        obs: ``x_t``, uint8 ``(B, F, H, W)``.
+        action: ``u_t``, float32 ``(B, n_u)``.
+        next_obs: ``x_{t+1}``, uint8 ``(B, F, H, W)``.
+    """
+
+    obs: torch.Tensor
+    action: torch.Tensor
+    next_obs: torch.Tensor
+
+
+class LossFunction(Protocol):
+    """Signature shared by every loss of the registry."""
+
+    def __call__(
+        self, model: EmbeddingModel, batch: TransitionBatch, config: TrainConfig,
+        generator: torch.Generator | None = None,
+    ) -> tuple[torch.Tensor, Metrics]:
+        """Return the scalar loss and its named terms."""
+        ...
+
+
+def _metrics(**terms: torch.Tensor) -> Metrics:
+    """Detach scalar tensors into floats with a single device transfer."""
+    values = torch.stack([t.detach().float() for t in terms.values()]).tolist()
+    return dict(zip(terms.keys(), values))
+
+
+def curvature_penalty(
+    f: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    z: torch.Tensor,
+    u: torch.Tensor,
+    eps_z: torch.Tensor,
+    eps_u: torch.Tensor,
+    jacobians: tuple[torch.Tensor, torch.Tensor] | None = None,
+) -> torch.Tensor:
+    """Per-sample local-linearity residual of the latent dynamics (paper Eq. for R_LLC).
+
+    ``|| f(z_bar, u_bar) - (A eps_z + B eps_u) - f(z, u) ||^2`` with ``z_bar = z + eps_z``,
+    ``u_bar = u + eps_u`` and ``A = df/dz``, ``B = df/du`` evaluated at ``(z_bar, u_bar)``
+    (the paper's practical variant). The Jacobian-vector products come from one batched
+    forward-mode pass (``torch.func.jvp``); with ``jacobians`` given (amortized PCC) the
+    supplied A ``(B, n_z, n_z)`` and B ``(B, n_z, n_u)`` are used instead.
+
+    Args:
+        f: Deterministic dynamics ``(z, u) -> z'`` on batches.
+        z: Latent states ``(B, n_z)``.
+        u: Actions ``(B, n_u)``.
+        eps_z: Latent perturbations ``(B, n_z)``.
+        eps_u: Action perturbations ``(B, n_u)``.
+        jacobians: Optional ``(A, B)`` evaluated at ``(z_bar, u_bar)``.
+
+    Returns:
+        Residuals ``(B,)``.
+    """
+    z_bar, u_bar = z + eps_z, u + eps_u
+    if jacobians is None:
+        f_bar, linear = jvp(f, (z_bar, u_bar), (eps_z, eps_u))
+    else:
+        a_mat, b_mat = jacobians
+        f_bar = f(z_bar, u_bar)
+        linear = (a_mat @ eps_z.unsqueeze(-1) + b_mat @ eps_u.unsqueeze(-1)).squeeze(-1)
+    return (f_bar - linear - f(z, u)).pow(2).sum(dim=-1)
+
+
+def _check_transition(model: EmbeddingModel, kind: str, method: str) -> None:
+    if model.config.transition_kind != kind:
+        raise ValueError(
+            f"Method {method!r} needs a model with transition_kind={kind!r}, got "
+            f"{model.config.transition_kind!r}. Build the model with "
+            f"model_config_for_method(config, {method!r})."
+        )
+
+
+def pcc_loss(
+    model: EmbeddingModel,
+    batch: TransitionBatch,
+    config: TrainConfig,
+    generator: torch.Generator | None = None,
+    *,
+    consistency: bool = True,
+    curvature: bool = True,
+    amortized: bool = False,
+) -> tuple[torch.Tensor, Metrics]:
+    """PCC objective (paper Eq. PCC loss, Section 4 and Appendix "Implementation").
+
+    ``L = lambda_p R'_3 + lambda_c R''_2 + lambda_cur R_LLC + vae_coef L_VAE + det_coef L_det``:
+
+    * prediction bound ``R'_3 = -log D(x_{t+1} | z_hat_{t+1}) + KL(Q(z_t | z_hat_{t+1}, x_t,
+      u_t) || E(z_t | x_t)) - H(E(. | x_{t+1})) - log F(z_hat_{t+1} | z_t, u_t)``;
+    * consistency bound ``R''_2 = KL(Q || E(z_t | x_t)) - H(E(. | x_{t+1})) - log F(z_hat_{t+1}
+      | z_t, u_t)`` (the same terms without reconstruction);
+    * curvature ``R_LLC = || f(z_bar, u_bar) - (A eps_z + B eps_u) - f(z, u) ||^2`` with
+      ``eps ~ N(0, delta^2 I)``, ``z ~ E(. | x_t)`` (detached: the term shapes F only, as in the
+      authors' implementation), A, B the true Jacobians at ``(z_bar, u_bar)`` (or the amortized
+      heads when ``amortized``);
+    * ``L_VAE = -log D(x_t | z) + KL(E(z | x_t) || N(0, I))``, ``z ~ E(. | x_t)``;
+    * ``L_det = -log D(x_{t+1} | f(mu(x_t), u_t))`` (deterministic cross-entropy).
+
+    Args:
+        model: Model with ``transition_kind="mlp"`` (and ``amortized=True`` for the heads).
+        batch: Transitions.
+        config: Weights ``lambda_p, lambda_c, lambda_cur, curvature_delta, vae_coef,
+            deterministic_ce_coef``.
+        generator: Source of all sampling noise.
+        consistency: Include R''_2 (False: ablation "pcc-no-consistency").
+        curvature: Include R_LLC (False: ablation "pcc-no-curvature").
+        amortized: Use the A, B heads in R_LLC ("pcc-amortized").
+
+    Returns:
+        ``(loss, metrics)``; metrics: loss, prediction, consistency, curvature, vae,
+        deterministic, reconstruction, kl_backward, entropy, transition_nll.
+    """
+    _check_transition(model, "mlp", "pcc")
+    if amortized and not model.config.amortized:
+        raise ValueError("Amortized curvature needs ModelConfig(amortized=True).")
+    x_t, u, x_next = batch
+    n = x_t.shape[0]
+    mean_all, logvar_all = model.encode(torch.cat([x_t, x_next], dim=0))
+    mu_t, mu_n = mean_all[:n], mean_all[n:]
+    lv_t, lv_n = logvar_all[:n], logvar_all[n:]
+
+    z_hat_next = gaussian_rsample(mu_n, lv_n, generator)
+    back_mean, back_logvar = model.backward_posterior(z_hat_next, x_t, u)
+    z_t = gaussian_rsample(back_mean, back_logvar, generator)
+    z_vae = gaussian_rsample(mu_t, lv_t, generator)
+
+    # One transition pass for F(. | z_t, u) and f(mu(x_t), u); one decoder pass for all images.
+    f_mean, f_logvar = model.transition(torch.cat([z_t, mu_t]), torch.cat([u, u]))
+    trans_mean, trans_logvar, det_next = f_mean[:n], f_logvar[:n], f_mean[n:]
+    logits = model.decode_logits(torch.cat([z_hat_next, z_vae, det_next]))
+    targets = to_float_image(torch.cat([x_next, x_t, x_next]))
+    log_lik = bernoulli_log_likelihood(logits, targets)
+    recon_next, recon_t, det_ll = log_lik[:n], log_lik[n:2 * n], log_lik[2 * n:]
+
+    kl_backward = gaussian_kl(back_mean, back_logvar, mu_t, lv_t).mean()
+    entropy = gaussian_entropy(lv_n).mean()
+    transition_nll = -gaussian_log_prob(z_hat_next, trans_mean, trans_logvar).mean()
+    reconstruction = -recon_next.mean()
+    consistency_term = kl_backward - entropy + transition_nll
+    prediction = reconstruction + consistency_term
+    vae = -recon_t.mean() + gaussian_kl_standard(mu_t, lv_t).mean()
+    deterministic = -det_ll.mean()
+
+    if curvature:
+        z_c, u_c = z_vae.detach(), u
+        eps_z = config.curvature_delta * torch.randn(
+            z_c.shape, generator=generator, dtype=z_c.dtype, device=z_c.device)
+        eps_u = config.curvature_delta * torch.randn(
+            u_c.shape, generator=generator, dtype=u_c.dtype, device=u_c.device)
+        jacobians = None
+        if amortized:
+            out = model.transition_full(z_c + eps_z, u_c + eps_u)
+            jacobians = (out.A, out.B)
+        curvature_term = curvature_penalty(
+            model.transition_mean, z_c, u_c, eps_z, eps_u, jacobians).mean()
+    else:
+        curvature_term = torch.zeros((), dtype=mu_t.dtype, device=mu_t.device)
+
+    loss = (
+        config.lambda_p * prediction
+        + (config.lambda_c * consistency_term if consistency else 0.0)
+        + (config.lambda_cur * curvature_term if curvature else 0.0)
+        + config.vae_coef * vae
+        + config.deterministic_ce_coef * deterministic
+    )
+    return loss, _metrics(
+        loss=loss, prediction=prediction, consistency=consistency_term,
+        curvature=curvature_term, vae=vae, deterministic=deterministic,
+        reconstruction=reconstruction, kl_backward=kl_backward, entropy=entropy,
+        transition_nll=transition_nll,
+    )
+
+
+def pcc_no_consistency_loss(
+    model: EmbeddingModel, batch: TransitionBatch, config: TrainConfig,
+    generator: torch.Generator | None = None,
+) -> tuple[torch.Tensor, Metrics]:
+    """PCC without the consistency bound: ``lambda_p R'_3 + lambda_cur R_LLC + VAE + det``."""
+    return pcc_loss(model, batch, config, generator, consistency=False)
+
+
+def pcc_no_curvature_loss(
+    model: EmbeddingModel, batch: TransitionBatch, config: TrainConfig,
+    generator: torch.Generator | None = None,
+) -> tuple[torch.Tensor, Metrics]:
+    """PCC without the curvature loss: ``lambda_p R'_3 + lambda_c R''_2 + VAE + det``."""
+    return pcc_loss(model, batch, config, generator, curvature=False)
+
+
+def pcc_amortized_loss(
+    model: EmbeddingModel, batch: TransitionBatch, config: TrainConfig,
+    generator: torch.Generator | None = None,
+) -> tuple[torch.Tensor, Metrics]:
+    """PCC with the amortized curvature loss R_LLC-Amor (A, B heads of the transition)."""
+    return pcc_loss(model, batch, config, generator, amortized=True)
+
+
+def e2c_loss(
+    model: EmbeddingModel,
+    batch: TransitionBatch,
+    config: TrainConfig,
+    generator: torch.Generator | None = None,
+) -> tuple[torch.Tensor, Metrics]:
+    """Embed to Control (Watter et al., 2015) with the paper's extra VAE term.
+
+    With ``z_t ~ E(. | x_t) = N(mu_t, Sigma_t)``, locally-linear ``A = I + v r^T``, B, o from the
+    transition network at ``z_t``, and ``z_hat_{t+1} = A z_t + B u_t + o``, so that
+    ``z_hat_{t+1} ~ Q = N(A mu_t + B u_t + o, A Sigma_t A^T)``::
+
+        L = -log D(x_t | z_t) - log D(x_{t+1} | z_hat_{t+1}) + KL(E(. | x_t) || N(0, I))
+            + lambda KL(Q || E(. | x_{t+1})) + vae_coef L_VAE
+
+    ``KL(Q || N(mu_n, S_n)) = 0.5 (tr(S_n^-1 A Sigma_t A^T) + (mu_n - m)^T S_n^-1 (mu_n - m)
+    - n_z + log det S_n - log det Sigma_t - 2 log |1 + r^T v|)`` using the matrix determinant
+    lemma ``det A = 1 + r^T v`` once. ``L_VAE`` re-uses the first and third terms.
+
+    Args:
+        model: Model with ``transition_kind="e2c_linear"``.
+        batch: Transitions.
+        config: ``e2c_lambda`` and ``vae_coef``.
+        generator: Source of the sampling noise.
+
+    Returns:
+        ``(loss, metrics)``; metrics: loss, reconstruction, prediction, kl_prior, kl_transition.
+    """
+    _check_transition(model, "e2c_linear", "e2c")
+    x_t, u, x_next = batch
+    n = x_t.shape[0]
+    mean_all, logvar_all = model.encode(torch.cat([x_t, x_next], dim=0))
+    mu_t, mu_n = mean_all[:n], mean_all[n:]
+    lv_t, lv_n = logvar_all[:n], logvar_all[n:]
+    z_t = gaussian_rsample(mu_t, lv_t, generator)
+
+    dynamics = model.dynamics
+    assert isinstance(dynamics, E2CTransition)
+    v, r, b_mat, o, _ = dynamics.components(z_t)
+    bu_o = (b_mat @ u.unsqueeze(-1)).squeeze(-1) + o
+    rv = (r * v).sum(-1, keepdim=True)
+    z_hat_next = z_t + v * (r * z_t).sum(-1, keepdim=True) + bu_o
+    m = mu_t + v * (r * mu_t).sum(-1, keepdim=True) + bu_o
+
+    logits = model.decode_logits(torch.cat([z_t, z_hat_next]))
+    log_lik = bernoulli_log_likelihood(logits, to_float_image(torch.cat([x_t, x_next])))
+    reconstruction = -log_lik[:n].mean()
+    prediction = -log_lik[n:].mean()
+    kl_prior = gaussian_kl_standard(mu_t, lv_t).mean()
+
+    eye = torch.eye(model.latent_dim, dtype=v.dtype, device=v.device)
+    a_mat = eye + v.unsqueeze(-1) * r.unsqueeze(-2)
+    inv_var_n = torch.exp(-lv_n)
+    trace = (a_mat.pow(2) * torch.exp(lv_t).unsqueeze(-2) * inv_var_n.unsqueeze(-1)).sum((-2, -1))
+    maha = ((mu_n - m).pow(2) * inv_var_n).sum(-1)
+    log_det_a = torch.log((1.0 + rv.squeeze(-1)).abs().clamp_min(1e-8))
+    kl_transition = 0.5 * (
+        trace + maha - model.latent_dim + lv_n.sum(-1) - lv_t.sum(-1) - 2.0 * log_det_a
+    ).mean()
+
+    vae = reconstruction + kl_prior
+    loss = (reconstruction + prediction + kl_prior + config.e2c_lambda * kl_transition
+            + config.vae_coef * vae)
+    return loss, _metrics(loss=loss, reconstruction=reconstruction, prediction=prediction,
+                          kl_prior=kl_prior, kl_transition=kl_transition)
+
+
+def rce_loss(
+    model: EmbeddingModel,
+    batch: TransitionBatch,
+    config: TrainConfig,
+    generator: torch.Generator | None = None,
+) -> tuple[torch.Tensor, Metrics]:
+    """Robust Controllable Embedding (Banijamali et al., 2018), Eq. 16 ELBO optimized directly.
+
+    With the locally-linear Gaussian transition ``F(z' | z, u) = N(A(z) z + B(z) u + o(z),
+    diag(sigma_F^2(z)))``, ``z_hat_{t+1} ~ E(. | x_{t+1})`` and ``z_t ~ Q(. | z_hat_{t+1}, x_t,
+    u_t)``::
+
+        L = -log D(x_{t+1} | z_hat_{t+1}) + KL(Q(z_t | z_hat_{t+1}, x_t, u_t) || E(z_t | x_t))
+            - H(E(. | x_{t+1})) - log F(z_hat_{t+1} | z_t, u_t) + vae_coef L_VAE
+
+    (no weighting or annealing of the middle terms, as in the PCC paper's comparison).
+
+    Args:
+        model: Model with ``transition_kind="e2c_linear"``.
+        batch: Transitions.
+        config: ``vae_coef``.
+        generator: Source of the sampling noise.
+
+    Returns:
+        ``(loss, metrics)``; metrics: loss, elbo, reconstruction, kl_backward, entropy,
+        transition_nll, vae.
+    """
+    _check_transition(model, "e2c_linear", "rce")
+    x_t, u, x_next = batch
+    n = x_t.shape[0]
+    mean_all, logvar_all = model.encode(torch.cat([x_t, x_next], dim=0))
+    mu_t, mu_n = mean_all[:n], mean_all[n:]
+    lv_t, lv_n = logvar_all[:n], logvar_all[n:]
+    z_hat_next = gaussian_rsample(mu_n, lv_n, generator)
+    back_mean, back_logvar = model.backward_posterior(z_hat_next, x_t, u)
+    z_t = gaussian_rsample(back_mean, back_logvar, generator)
+    z_vae = gaussian_rsample(mu_t, lv_t, generator)
+    trans_mean, trans_logvar = model.transition(z_t, u)
+
+    logits = model.decode_logits(torch.cat([z_hat_next, z_vae]))
+    log_lik = bernoulli_log_likelihood(logits, to_float_image(torch.cat([x_next, x_t])))
+    reconstruction = -log_lik[:n].mean()
+    kl_backward = gaussian_kl(back_mean, back_logvar, mu_t, lv_t).mean()
+    entropy = gaussian_entropy(lv_n).mean()
+    transition_nll = -gaussian_log_prob(z_hat_next, trans_mean, trans_logvar).mean()
+    elbo = -(reconstruction + kl_backward - entropy + transition_nll)
+    vae = -log_lik[n:].mean() + gaussian_kl_standard(mu_t, lv_t).mean()
+    loss = -elbo + config.vae_coef * vae
+    return loss, _metrics(loss=loss, elbo=elbo, reconstruction=reconstruction,
+                          kl_backward=kl_backward, entropy=entropy,
+                          transition_nll=transition_nll, vae=vae)
+
+
+@dataclasses.dataclass(frozen=True)
+class MethodSpec:
+    """A training method: its loss and the model options it needs.
+
+    Attributes:
+        name: Registry name.
+        loss: The loss function.
+        model_options: ``ModelConfig`` fields the method requires (applied by
+            :func:`model_config_for_method`).
+    """
+
+    name: str
+    loss: LossFunction
+    model_options: dict[str, object]
+
+
+_MLP = {"transition_kind": "mlp", "amortized": False}
+_LINEAR = {"transition_kind": "e2c_linear", "amortized": False}
+
+#: Registry of training methods (``pcc``, ``e2c``, ``rce`` and the PCC ablations).
+METHODS: dict[str, MethodSpec] = {
+    spec.name: spec
+    for spec in (
+        MethodSpec("pcc", pcc_loss, _MLP),
+        MethodSpec("e2c", e2c_loss, _LINEAR),
+        MethodSpec("rce", rce_loss, _LINEAR),
+        MethodSpec("pcc-no-consistency", pcc_no_consistency_loss, _MLP),
+        MethodSpec("pcc-no-curvature", pcc_no_curvature_loss, _MLP),
+        MethodSpec("pcc-amortized", pcc_amortized_loss,
+                   {"transition_kind": "mlp", "amortized": True}),
+    )
+}
+LOSSES = METHODS  # name used in docs/ARCHITECTURE.md
+
+
+def _spec(method: str) -> MethodSpec:
+    if method not in METHODS:
+        raise ValueError(f"Unknown method {method!r}; choose one of {sorted(METHODS)}.")
+    return METHODS[method]
+
+
+def get_loss(method: str) -> LossFunction:
+    """Return the loss function of a method name (see :data:`METHODS`).
+
+    Raises:
+        ValueError: Unknown name; the message lists the known ones.
+    """
+    return _spec(method).loss
+
+
+def model_config_for_method(config: ModelConfig, method: str) -> ModelConfig:
+    """Return ``config`` with the transition options that ``method`` needs.
+
+    Example:
+        >>> from pcc_agent.presets import get_preset
+        >>> model_config_for_method(get_preset("pcc/Planar-v0").model, "e2c").transition_kind
+        'e2c_linear'
+    """
+    return dataclasses.replace(config, **_spec(method).model_options)
+
+
+__all__ = [
+    "LOSSES",
+    "METHODS",
+    "LossFunction",
+    "MethodSpec",
+    "TransitionBatch",
+    "curvature_penalty",
+    "e2c_loss",
+    "get_loss",
+    "model_config_for_method",
+    "pcc_amortized_loss",
+    "pcc_loss",
+    "pcc_no_consistency_loss",
+    "pcc_no_curvature_loss",
+    "rce_loss",
+]

@@ -1,0 +1,130 @@
+"""The embedding model: encoder, latent transition, decoder and backward model (no loss code).
+
+Notation: observations x are uint8 ``(B, F, H, W)``; latent states z ``(B, n_z)``; actions
+u ``(B, n_u)``. The planner only needs :meth:`EmbeddingModel.encode`,
+:meth:`EmbeddingModel.transition_mean` and :meth:`EmbeddingModel.linearize`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import torch
+from torch import nn
+from torch.func import jacrev, jvp, vmap
+
+from pcc_agent.networks import TransitionOutput, build_networks
+from pcc_agent.presets import ModelConfig
+
+
+class EmbeddingModel(nn.Module):
+    """E(z|x), F(z'|z,u), D(x|z) and Q(z_t|z_hat_{t+1},x_t,u_t) for one observation space.
+
+    Args:
+        obs_shape: Observation shape ``(frames, H, W)``.
+        action_dim: Action dimension n_u.
+        config: Architecture (:class:`pcc_agent.presets.ModelConfig`).
+
+    Example:
+        >>> import torch
+        >>> from pcc_agent.presets import get_preset
+        >>> model = EmbeddingModel((1, 40, 40), 2, get_preset("pcc/Planar-v0").model)
+        >>> mean, logvar = model.encode(torch.zeros(5, 1, 40, 40, dtype=torch.uint8))
+        >>> A, B = model.linearize(mean, torch.zeros(5, 2))
+        >>> tuple(A.shape), tuple(B.shape)
+        ((5, 2, 2), (5, 2, 2))
+    """
+
+    def __init__(self, obs_shape: Sequence[int], action_dim: int, config: ModelConfig) -> None:
+        super().__init__()
+        self.obs_shape = tuple(int(s) for s in obs_shape)
+        self.action_dim = int(action_dim)
+        self.config = config
+        nets = build_networks(self.obs_shape, self.action_dim, config)
+        self.encoder = nets.encoder
+        self.decoder = nets.decoder
+        self.dynamics = nets.transition
+        self.backward_model = nets.backward
+
+    @property
+    def latent_dim(self) -> int:
+        """Latent dimension n_z."""
+        return self.config.latent_dim
+
+    def architecture(self) -> dict[str, Any]:
+        """JSON-serializable description used to rebuild the model from a checkpoint."""
+        return {
+            "obs_shape": list(self.obs_shape),
+            "action_dim": self.action_dim,
+            "model_config": self.config.to_dict(),
+        }
+
+    def encode(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and log-variance of E(z | x) for a batch of observations ``(B, F, H, W)``."""
+        return self.encoder(obs)
+
+    def transition(self, z: torch.Tensor, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and log-variance of F(z' | z, u)."""
+        out = self.dynamics(z, u)
+        return out.mean, out.logvar
+
+    def transition_full(self, z: torch.Tensor, u: torch.Tensor) -> TransitionOutput:
+        """Mean, log-variance and the A, B matrices (amortized or E2C; None otherwise)."""
+        return self.dynamics(z, u)
+
+    def transition_mean(self, z: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        """Deterministic latent dynamics ``f(z, u)`` (the mean of F), any leading shape."""
+        return self.dynamics.mean(z, u)
+
+    def transition_jvp(
+        self, z: torch.Tensor, u: torch.Tensor, dz: torch.Tensor, du: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Return ``f(z, u)`` and ``df/dz dz + df/du du`` with one forward-mode pass.
+
+        Differentiable with respect to the parameters and to ``z``, ``u`` (used by the
+        curvature loss).
+        """
+        return jvp(self.dynamics.mean, (z, u), (dz, du))
+
+    def linearize(
+        self, z: torch.Tensor, u: torch.Tensor, exact: bool | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Jacobians ``A = df/dz`` ``(B, n_z, n_z)`` and ``B = df/du`` ``(B, n_z, n_u)``.
+
+        Args:
+            z: Latent states ``(B, n_z)``.
+            u: Actions ``(B, n_u)``.
+            exact: True: Jacobians of :meth:`transition_mean` (batched ``vmap(jacrev)``).
+                False: the network's A, B heads (amortized PCC, or E2C/RCE's locally-linear
+                A, B). None (default): the heads when the model has them, else exact.
+
+        Returns:
+            ``(A, B)``.
+        """
+        use_heads = (self.config.amortized or self.config.transition_kind == "e2c_linear")
+        if exact is None:
+            exact = not use_heads
+        if not exact:
+            if not use_heads:
+                raise ValueError(
+                    "This model has no A/B heads; use exact=True (or build it with "
+                    "ModelConfig(amortized=True))."
+                )
+            out = self.dynamics(z, u)
+            return out.A, out.B
+        return vmap(jacrev(self.dynamics.mean, argnums=(0, 1)))(z, u)
+
+    def decode_logits(self, z: torch.Tensor) -> torch.Tensor:
+        """Bernoulli logits of D(x | z), shaped ``(B, F, H, W)``."""
+        return self.decoder(z)
+
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        """Pixel probabilities ``sigmoid(logits)`` in [0, 1]."""
+        return torch.sigmoid(self.decoder(z))
+
+    def backward_posterior(
+        self, z_next: torch.Tensor, obs: torch.Tensor, u: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and log-variance of Q(z_t | z_hat_{t+1}, x_t, u_t)."""
+        return self.backward_model(z_next, obs, u)

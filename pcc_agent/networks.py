@@ -1,0 +1,325 @@
+"""Encoder, decoder, latent transition and backward model, built by one factory.
+
+Shapes: observations are uint8 ``(B, F, H, W)`` (``F`` frames, oldest first), converted to float
+in [0, 1] inside the networks; latent states ``z`` are ``(B, n_z)``; actions ``u`` ``(B, n_u)``.
+
+* Encoder E(z | x): backbone (MLP on the flattened image, or CNN) + a linear layer to the mean
+  and log-variance of a diagonal Gaussian.
+* Decoder D(x | z): backbone + logits of a Bernoulli per pixel, shaped like the observation.
+* Transition F(z' | z, u): either a Gaussian MLP whose mean has a skip connection
+  (``mean = z + g(z, u)``), optionally with amortized Jacobian heads A (n_z x n_z) and
+  B (n_z x n_u); or the E2C / RCE locally-linear form ``z' = A z + B u + o`` with
+  ``A = I + v r^T`` and (v, r, B, o) computed by an MLP on z.
+* Backward model Q(z_t | z_hat_{t+1}, x_t, u_t): each input through its own layer
+  (N_z, N_u, N_x units), concatenated, a joint layer (N_joint), then mean and log-variance.
+
+ReLU follows every hidden layer. Sizes come from the spaces and a :class:`ModelConfig`; CNN
+flatten sizes are found with a dummy forward pass.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from pcc_agent.presets import ConvSpec, ModelConfig
+
+
+def to_float_image(obs: torch.Tensor) -> torch.Tensor:
+    """Convert observations to float32 in [0, 1].
+
+    Args:
+        obs: uint8 images in [0, 255], or floating images already scaled to [0, 1].
+
+    Returns:
+        A float32 tensor of the same shape.
+    """
+    if obs.dtype == torch.uint8:
+        return obs.to(torch.float32) / 255.0
+    return obs.to(torch.float32)
+
+
+def mlp(sizes: Sequence[int], activate_last: bool = False) -> nn.Sequential:
+    """Fully-connected network ``sizes[0] -> ... -> sizes[-1]`` with ReLU between layers.
+
+    Args:
+        sizes: Layer widths including the input width.
+        activate_last: Whether a ReLU also follows the last layer.
+
+    Returns:
+        The network (empty ``Sequential`` = identity when ``len(sizes) == 1``).
+    """
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2 or activate_last:
+            layers.append(nn.ReLU())
+    return nn.Sequential(*layers)
+
+
+class _ImageInput(nn.Module):
+    """uint8 -> float in [0, 1], then optional average-pool downsampling."""
+
+    def __init__(self, downsample: int) -> None:
+        super().__init__()
+        self.downsample = downsample
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        x = to_float_image(obs)
+        if self.downsample > 1:
+            x = F.avg_pool2d(x, self.downsample, ceil_mode=True)
+        return x
+
+
+def _conv_stack(in_channels: int, convs: Sequence[ConvSpec]) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for spec in convs:
+        layers += [
+            nn.Conv2d(in_channels, spec.channels, spec.kernel_size, spec.stride,
+                      padding=spec.kernel_size // 2),
+            nn.ReLU(),
+        ]
+        in_channels = spec.channels
+    return nn.Sequential(*layers)
+
+
+def _image_backbone(
+    obs_shape: tuple[int, int, int], kind: str, convs: Sequence[ConvSpec],
+    hidden: Sequence[int], downsample: int,
+) -> tuple[nn.Sequential, int]:
+    """Image -> features; returns the module and its output width (found by a dummy pass)."""
+    layers: list[nn.Module] = [_ImageInput(downsample)]
+    if kind == "cnn":
+        layers.append(_conv_stack(obs_shape[0], convs))
+    layers.append(nn.Flatten())
+    trunk = nn.Sequential(*layers)
+    with torch.no_grad():
+        flat = trunk(torch.zeros((1, *obs_shape), dtype=torch.uint8)).shape[1]
+    head = mlp([flat, *hidden], activate_last=True)
+    width = hidden[-1] if hidden else flat
+    return nn.Sequential(trunk, head), width
+
+
+class GaussianEncoder(nn.Module):
+    """E(z | x): image -> (mean, logvar), each ``(B, n_z)``."""
+
+    def __init__(self, obs_shape: tuple[int, int, int], config: ModelConfig) -> None:
+        super().__init__()
+        self.backbone, width = _image_backbone(
+            obs_shape, config.encoder_kind, config.encoder_convs, config.encoder_hidden,
+            config.encoder_downsample,
+        )
+        self.head = nn.Linear(width, 2 * config.latent_dim)
+        self.min_logvar, self.max_logvar = config.min_logvar, config.max_logvar
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Return the mean and log-variance of E(z | obs)."""
+        mean, logvar = self.head(self.backbone(obs)).chunk(2, dim=-1)
+        return mean, logvar.clamp(self.min_logvar, self.max_logvar)
+
+
+class BernoulliDecoder(nn.Module):
+    """D(x | z): latent ``(B, n_z)`` -> logits ``(B, F, H, W)``."""
+
+    def __init__(self, obs_shape: tuple[int, int, int], config: ModelConfig) -> None:
+        super().__init__()
+        self.obs_shape = tuple(obs_shape)
+        frames, height, width = obs_shape
+        self.kind = config.decoder_kind
+        if self.kind == "mlp":
+            self.net = mlp([config.latent_dim, *config.decoder_hidden, frames * height * width])
+            return
+        if config.decoder_convs[-1].channels != frames:
+            raise ValueError(
+                f"The last decoder ConvSpec must have {frames} channels (one per observation "
+                f"frame), got {config.decoder_convs[-1].channels}."
+            )
+        scale = 2 ** (len(config.decoder_convs) - 1) * config.decoder_output_upsample
+        self.grid = (config.decoder_grid_channels, math.ceil(height / scale),
+                     math.ceil(width / scale))
+        self.fc = mlp(
+            [config.latent_dim, *config.decoder_hidden, math.prod(self.grid)], activate_last=True
+        )
+        layers: list[nn.Module] = []
+        channels = config.decoder_grid_channels
+        for i, spec in enumerate(config.decoder_convs):
+            layers.append(nn.Conv2d(channels, spec.channels, spec.kernel_size, 1,
+                                    padding=spec.kernel_size // 2))
+            if i < len(config.decoder_convs) - 1:
+                layers += [nn.ReLU(), nn.Upsample(scale_factor=2, mode="nearest")]
+            channels = spec.channels
+        self.convs = nn.Sequential(*layers)
+        self.output_upsample = config.decoder_output_upsample
+
+    def forward(self, z: torch.Tensor) -> torch.Tensor:
+        """Return the Bernoulli logits of D(x | z), shaped ``(B, F, H, W)``."""
+        if self.kind == "mlp":
+            return self.net(z).view(z.shape[0], *self.obs_shape)
+        x = self.convs(self.fc(z).view(z.shape[0], *self.grid))
+        if self.output_upsample > 1:
+            x = F.interpolate(x, scale_factor=self.output_upsample, mode="nearest")
+        return x[..., : self.obs_shape[1], : self.obs_shape[2]]
+
+
+class TransitionOutput(NamedTuple):
+    """Output of a transition network.
+
+    Attributes:
+        mean: Mean of F(z' | z, u), ``(B, n_z)``.
+        logvar: Log-variance, ``(B, n_z)``.
+        A: ``(B, n_z, n_z)`` matrix (amortized Jacobian or E2C's A), or None.
+        B: ``(B, n_z, n_u)`` matrix, or None.
+    """
+
+    mean: torch.Tensor
+    logvar: torch.Tensor
+    A: torch.Tensor | None
+    B: torch.Tensor | None
+
+
+class MLPTransition(nn.Module):
+    """Gaussian MLP transition, ``mean = z + g(z, u)``, optional amortized A, B heads."""
+
+    def __init__(self, latent_dim: int, action_dim: int, config: ModelConfig) -> None:
+        super().__init__()
+        self.nz, self.nu = latent_dim, action_dim
+        hidden = config.transition_hidden
+        self.backbone = mlp([latent_dim + action_dim, *hidden], activate_last=True)
+        width = hidden[-1] if hidden else latent_dim + action_dim
+        self.head = nn.Linear(width, 2 * latent_dim)
+        self.amortized = config.amortized
+        if self.amortized:
+            self.jacobian_head = nn.Linear(width, latent_dim * (latent_dim + action_dim))
+        self.min_logvar, self.max_logvar = config.min_logvar, config.max_logvar
+
+    def forward(self, z: torch.Tensor, u: torch.Tensor) -> TransitionOutput:
+        """Return mean, logvar (and A, B when amortized) of F(z' | z, u)."""
+        h = self.backbone(torch.cat([z, u], dim=-1))
+        delta, logvar = self.head(h).chunk(2, dim=-1)
+        a_mat = b_mat = None
+        if self.amortized:
+            jac = self.jacobian_head(h).view(-1, self.nz, self.nz + self.nu)
+            a_mat, b_mat = jac[..., : self.nz], jac[..., self.nz:]
+        return TransitionOutput(z + delta, logvar.clamp(self.min_logvar, self.max_logvar),
+                                a_mat, b_mat)
+
+    def mean(self, z: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        """Mean only (cheaper: skips the Jacobian heads)."""
+        delta = self.head(self.backbone(torch.cat([z, u], dim=-1)))[..., : self.nz]
+        return z + delta
+
+
+class E2CTransition(nn.Module):
+    """Locally-linear transition of E2C / RCE: ``z' = A(z) z + B(z) u + o(z)``.
+
+    ``A = I + v r^T`` (rank-one perturbation of the identity, so ``det A = 1 + r^T v``); the
+    log-variance head gives the transition noise used by RCE (E2C propagates the encoder's
+    covariance instead: ``A Sigma A^T``).
+    """
+
+    def __init__(self, latent_dim: int, action_dim: int, config: ModelConfig) -> None:
+        super().__init__()
+        self.nz, self.nu = latent_dim, action_dim
+        hidden = config.transition_hidden
+        self.backbone = mlp([latent_dim, *hidden], activate_last=True)
+        width = hidden[-1] if hidden else latent_dim
+        # v, r, o, logvar (n_z each) and B (n_z * n_u)
+        self.head = nn.Linear(width, 4 * latent_dim + latent_dim * action_dim)
+        self.min_logvar, self.max_logvar = config.min_logvar, config.max_logvar
+
+    def components(
+        self, z: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Return ``(v, r, B, o, logvar)`` at ``z``; B is ``(B, n_z, n_u)``."""
+        out = self.head(self.backbone(z))
+        nz = self.nz
+        v, r, o, logvar = out[..., :nz], out[..., nz:2 * nz], out[..., 2 * nz:3 * nz], \
+            out[..., 3 * nz:4 * nz]
+        b_mat = out[..., 4 * nz:].reshape(*z.shape[:-1], nz, self.nu)
+        return v, r, b_mat, o, logvar.clamp(self.min_logvar, self.max_logvar)
+
+    def forward(self, z: torch.Tensor, u: torch.Tensor) -> TransitionOutput:
+        """Return mean ``A z + B u + o``, the noise log-variance, A and B."""
+        v, r, b_mat, o, logvar = self.components(z)
+        # A z = z + v (r . z): no need to build A for the mean.
+        mean = z + v * (r * z).sum(-1, keepdim=True) + (b_mat @ u.unsqueeze(-1)).squeeze(-1) + o
+        eye = torch.eye(self.nz, dtype=z.dtype, device=z.device)
+        a_mat = eye + v.unsqueeze(-1) * r.unsqueeze(-2)
+        return TransitionOutput(mean, logvar, a_mat, b_mat)
+
+    def mean(self, z: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        """Mean ``A z + B u + o`` only."""
+        v, r, b_mat, o, _ = self.components(z)
+        return z + v * (r * z).sum(-1, keepdim=True) + (b_mat @ u.unsqueeze(-1)).squeeze(-1) + o
+
+
+class BackwardModel(nn.Module):
+    """Q(z_t | z_hat_{t+1}, x_t, u_t) -> (mean, logvar), each ``(B, n_z)``."""
+
+    def __init__(self, obs_shape: tuple[int, int, int], action_dim: int,
+                 config: ModelConfig) -> None:
+        super().__init__()
+        nz = config.latent_dim
+        self.z_path = mlp([nz, config.backward_nz], activate_last=True)
+        self.u_path = mlp([action_dim, config.backward_nu], activate_last=True)
+        self.x_path, _ = _image_backbone(
+            obs_shape, "mlp", (), (config.backward_nx,), config.encoder_downsample
+        )
+        self.joint = mlp(
+            [config.backward_nz + config.backward_nu + config.backward_nx, config.backward_joint],
+            activate_last=True,
+        )
+        self.head = nn.Linear(config.backward_joint, 2 * nz)
+        self.min_logvar, self.max_logvar = config.min_logvar, config.max_logvar
+
+    def forward(self, z_next: torch.Tensor, obs: torch.Tensor,
+                u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Return the mean and log-variance of Q(z_t | z_next, obs, u)."""
+        h = torch.cat([self.z_path(z_next), self.u_path(u), self.x_path(obs)], dim=-1)
+        mean, logvar = self.head(self.joint(h)).chunk(2, dim=-1)
+        return mean, logvar.clamp(self.min_logvar, self.max_logvar)
+
+
+class Networks(NamedTuple):
+    """The four networks of an embedding model."""
+
+    encoder: GaussianEncoder
+    decoder: BernoulliDecoder
+    transition: MLPTransition | E2CTransition
+    backward: BackwardModel
+
+
+def build_networks(obs_shape: Sequence[int], action_dim: int, config: ModelConfig) -> Networks:
+    """Build encoder, decoder, transition and backward model for the given spaces.
+
+    Args:
+        obs_shape: Observation shape ``(frames, H, W)``.
+        action_dim: Action dimension n_u.
+        config: Architecture.
+
+    Returns:
+        A :class:`Networks` tuple.
+
+    Raises:
+        ValueError: ``obs_shape`` is not ``(frames, H, W)`` or ``action_dim < 1``.
+    """
+    if len(obs_shape) != 3:
+        raise ValueError(
+            f"obs_shape must be (frames, H, W), got {tuple(obs_shape)}; add a channel axis for "
+            "single-frame images."
+        )
+    if action_dim < 1:
+        raise ValueError(f"action_dim must be >= 1, got {action_dim}.")
+    shape = (int(obs_shape[0]), int(obs_shape[1]), int(obs_shape[2]))
+    transition_cls = MLPTransition if config.transition_kind == "mlp" else E2CTransition
+    return Networks(
+        encoder=GaussianEncoder(shape, config),
+        decoder=BernoulliDecoder(shape, config),
+        transition=transition_cls(config.latent_dim, action_dim, config),
+        backward=BackwardModel(shape, action_dim, config),
+    )
