@@ -338,7 +338,9 @@ def line_search(
     n = n_b * n_a
     u_ff = (u.unsqueeze(1) + alphas.view(1, n_a, 1, 1) * k.unsqueeze(1)).reshape(n, horizon, nu)
     K_all = K.unsqueeze(1).expand(n_b, n_a, horizon, nu, nz).reshape(n, horizon, nu, nz)
-    z_bar = z.unsqueeze(1).expand(n_b, n_a, horizon + 1, nz).reshape(n, horizon + 1, nz)
+    # A diverged nominal (only with zero gains, see ilqr_solve) must not turn 0 * inf into NaN.
+    z_finite = torch.nan_to_num(z, nan=0.0, posinf=0.0, neginf=0.0)
+    z_bar = z_finite.unsqueeze(1).expand(n_b, n_a, horizon + 1, nz).reshape(n, horizon + 1, nz)
     z_t = z_bar[:, 0]
     states, actions = [z_t], []
     for u_ff_t, K_t, z_bar_t in zip(u_ff.unbind(1), K_all.unbind(1), z_bar.unbind(1)):
@@ -418,8 +420,13 @@ def ilqr_solve(
             bad = ~(finite_nominal & np.isfinite(A_np).all((1, 2, 3))
                     & np.isfinite(B_np).all((1, 2, 3)) & np.isfinite(l_z).all((1, 2)))
             if bad.any():
-                # Diverged nominal trajectory: step towards lower action cost only.
+                # Diverged nominal: step towards lower action cost only (zero gains), which
+                # can bring the plan back to where the dynamics are finite.
                 A_np[bad], B_np[bad], l_z[bad] = 0.0, 0.0, 0.0
+                # Finite plan with non-finite Jacobians: nothing trustworthy to improve with.
+                broken = bad & finite_nominal & active
+                status[broken] = int(Status.NO_IMPROVEMENT)
+                active &= ~broken
             u_np = _to_numpy(u)
             while True:
                 result = backward_pass(
@@ -445,7 +452,9 @@ def ilqr_solve(
             z_new, u_new, J_new = line_search(dynamics, cost, z, u, k, K, alphas, low, high)
             J_new_np = _to_numpy(J_new)
             accept = active & ~predicted_small & (J_new_np < J_np)
-            achieved_small = accept & (J_np - J_new_np <= config.tolerance * np.abs(J_np))
+            with np.errstate(invalid="ignore"):  # inf - inf when recovering from divergence
+                small_step = J_np - J_new_np <= config.tolerance * np.abs(J_np)
+            achieved_small = accept & np.isfinite(J_np) & small_step
             accept_t = torch.from_numpy(accept).to(z.device)
             z = torch.where(accept_t[:, None, None], z_new, z)
             u = torch.where(accept_t[:, None, None], u_new, u)
