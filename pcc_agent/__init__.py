@@ -1,3 +1,19 @@
-"""Controllable embeddings (PCC, E2C, RCE) and latent iLQR-MPC control."""
+"""Controllable embeddings (PCC, E2C, RCE) and latent iLQR-MPC control.
+
+The main entry point is :class:`PCCAgent`; it is imported lazily so that importing a
+submodule (e.g. :mod:`pcc_agent.planning`) stays light.
+"""
+
+from typing import Any
 
 __version__ = "0.1.0"
+
+__all__ = ["PCCAgent", "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "PCCAgent":
+        from pcc_agent.agent import PCCAgent
+
+        return PCCAgent
+    raise AttributeError(f"module 'pcc_agent' has no attribute {name!r}")

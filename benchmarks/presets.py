@@ -1,0 +1,161 @@
+"""Presets of the reproduction pipeline: which grid to run, and the paper's published numbers.
+
+Every number that decides an evaluation is fixed here and written beside each result: the
+grid (envs x methods x model seeds x tasks), the data sizes, the model variant and the task
+seeds. Planner and training settings come from :mod:`pcc_agent.presets` per environment.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["PAPER_RESULTS", "REPRODUCE_PRESETS", "ReproducePreset", "ALL_METHODS", "ALL_ENVS"]
+
+ALL_ENVS: tuple[str, ...] = (
+    "pcc/Planar-v0",
+    "pcc/PendulumSwingUp-v0",
+    "pcc/CartPole-v0",
+    "pcc/ThreeLink-v0",
+    "pcc/LaneKeeping-v0",
+)
+ALL_METHODS: tuple[str, ...] = (
+    "e2c",
+    "rce",
+    "pcc",
+    "pcc-no-consistency",
+    "pcc-no-curvature",
+    "pcc-amortized",
+)
+
+
+@dataclass(frozen=True)
+class ReproducePreset:
+    """A grid of the reproducible pipeline (paper Section 6: N models x M tasks).
+
+    Attributes:
+        name: Preset name, written beside every number it produced.
+        envs: Environment ids.
+        methods: Method names (``pcc_agent.losses.METHODS``).
+        num_models: Independently trained models per (env, method, noise); seeds 0..N-1.
+        num_tasks: Control tasks per model, start states drawn with :attr:`task_seed`.
+        model_variant: ``"paper"`` (exact architectures) or ``"fast"`` (CPU-friendly CNNs).
+        noise_levels: Process-noise standard deviations (0 = deterministic, Table 1).
+        num_samples: Per-env data-set size overrides (default: the paper's sizes).
+        max_epochs: Override of the training epoch cap (None: the env preset's).
+        task_seed: Base seed of the control tasks (the same tasks for every model and method).
+    """
+
+    name: str
+    envs: tuple[str, ...]
+    methods: tuple[str, ...]
+    num_models: int
+    num_tasks: int
+    model_variant: str = "paper"
+    noise_levels: tuple[float, ...] = (0.0,)
+    num_samples: dict[str, int] = field(default_factory=dict)
+    max_epochs: int | None = None
+    task_seed: int = 2020
+
+    def replace(self, **changes: Any) -> ReproducePreset:
+        """A copy with some fields changed (used by the command-line overrides)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly representation."""
+        return dataclasses.asdict(self)
+
+
+REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
+    # A few minutes on 2 CPU cores: the README's one-command demo and the CI smoke test.
+    "quick": ReproducePreset(
+        name="quick",
+        envs=("pcc/Planar-v0",),
+        methods=("pcc",),
+        num_models=2,
+        num_tasks=5,
+        model_variant="paper",
+        max_epochs=150,
+    ),
+    # The paper's protocol: 10 models x 10 tasks, the paper's data sizes and architectures.
+    "paper": ReproducePreset(
+        name="paper",
+        envs=ALL_ENVS,
+        methods=ALL_METHODS,
+        num_models=10,
+        num_tasks=10,
+        model_variant="paper",
+    ),
+    # The same protocol with the CPU-friendly CNNs for CartPole, the arms and LaneKeeping.
+    "paper-fast": ReproducePreset(
+        name="paper-fast",
+        envs=ALL_ENVS,
+        methods=ALL_METHODS,
+        num_models=10,
+        num_tasks=10,
+        model_variant="fast",
+    ),
+    # Table 3: noisy dynamics.
+    "paper-noisy": ReproducePreset(
+        name="paper-noisy",
+        envs=("pcc/Planar-v0", "pcc/PendulumSwingUp-v0", "pcc/CartPole-v0", "pcc/ThreeLink-v0"),
+        methods=("e2c", "rce", "pcc"),
+        num_models=10,
+        num_tasks=10,
+        model_variant="fast",
+        noise_levels=(1.0,),
+    ),
+}
+
+# The paper's Tables 1-3: (mean, standard error) in percent of steps in goal.
+# Keys: (env id, method, noise std) -> {"all": (mean, se), "top1": (mean, se)}.
+# Table 3's subscripts are the noise variance; we map variance 1 -> std 1 and variance 2 ->
+# std sqrt(2).
+_T = dict[tuple[str, str, float], dict[str, tuple[float, float]]]
+PAPER_RESULTS: _T = {
+    ("pcc/Planar-v0", "rce", 0.0): {"all": (2.1, 0.8), "top1": (9.2, 1.4)},
+    ("pcc/Planar-v0", "e2c", 0.0): {"all": (5.5, 1.7), "top1": (36.5, 3.6)},
+    ("pcc/Planar-v0", "pcc", 0.0): {"all": (35.7, 3.4), "top1": (72.1, 0.4)},
+    ("pcc/PendulumSwingUp-v0", "rce", 0.0): {"all": (24.7, 3.1), "top1": (68.8, 2.2)},
+    ("pcc/PendulumSwingUp-v0", "e2c", 0.0): {"all": (46.8, 4.1), "top1": (89.7, 0.5)},
+    ("pcc/PendulumSwingUp-v0", "pcc", 0.0): {"all": (58.7, 3.7), "top1": (90.3, 0.4)},
+    ("pcc/CartPole-v0", "rce", 0.0): {"all": (59.5, 4.1), "top1": (99.45, 0.1)},
+    ("pcc/CartPole-v0", "e2c", 0.0): {"all": (7.3, 1.5), "top1": (40.2, 3.2)},
+    ("pcc/CartPole-v0", "pcc", 0.0): {"all": (54.3, 3.9), "top1": (93.9, 1.7)},
+    ("pcc/ThreeLink-v0", "rce", 0.0): {"all": (1.1, 0.4), "top1": (10.6, 0.8)},
+    ("pcc/ThreeLink-v0", "e2c", 0.0): {"all": (4.7, 1.1), "top1": (20.9, 0.8)},
+    ("pcc/ThreeLink-v0", "pcc", 0.0): {"all": (18.8, 2.1), "top1": (47.2, 1.7)},
+    ("pcc/LaneKeeping-v0", "rce", 0.0): {"all": (27.4, 1.8), "top1": (39.9, 2.2)},
+    ("pcc/LaneKeeping-v0", "e2c", 0.0): {"all": (28.2, 1.9), "top1": (54.1, 2.3)},
+    ("pcc/LaneKeeping-v0", "pcc", 0.0): {"all": (60.7, 1.1), "top1": (68.6, 0.4)},
+    # Table 2 (ablations, average over all models).
+    ("pcc/Planar-v0", "pcc-no-consistency", 0.0): {"all": (0.0, 0.0)},
+    ("pcc/Planar-v0", "pcc-no-curvature", 0.0): {"all": (29.6, 3.5)},
+    ("pcc/Planar-v0", "pcc-amortized", 0.0): {"all": (41.7, 3.7)},
+    ("pcc/PendulumSwingUp-v0", "pcc-no-consistency", 0.0): {"all": (52.3, 3.5)},
+    ("pcc/PendulumSwingUp-v0", "pcc-no-curvature", 0.0): {"all": (50.3, 3.3)},
+    ("pcc/PendulumSwingUp-v0", "pcc-amortized", 0.0): {"all": (54.2, 3.1)},
+    ("pcc/CartPole-v0", "pcc-no-consistency", 0.0): {"all": (5.1, 0.4)},
+    ("pcc/CartPole-v0", "pcc-no-curvature", 0.0): {"all": (17.4, 1.6)},
+    ("pcc/CartPole-v0", "pcc-amortized", 0.0): {"all": (14.3, 1.2)},
+    ("pcc/ThreeLink-v0", "pcc-no-consistency", 0.0): {"all": (9.1, 1.5)},
+    ("pcc/ThreeLink-v0", "pcc-no-curvature", 0.0): {"all": (13.1, 1.9)},
+    ("pcc/ThreeLink-v0", "pcc-amortized", 0.0): {"all": (11.5, 1.8)},
+    # Table 3 (noisy dynamics).
+    ("pcc/Planar-v0", "rce", 1.0): {"all": (1.2, 0.6), "top1": (5.5, 1.2)},
+    ("pcc/Planar-v0", "e2c", 1.0): {"all": (0.6, 0.3), "top1": (6.1, 0.9)},
+    ("pcc/Planar-v0", "pcc", 1.0): {"all": (17.9, 3.1), "top1": (44.7, 3.6)},
+    ("pcc/Planar-v0", "rce", 2.0**0.5): {"all": (0.4, 0.2), "top1": (1.7, 0.5)},
+    ("pcc/Planar-v0", "e2c", 2.0**0.5): {"all": (1.5, 0.9), "top1": (15.5, 2.6)},
+    ("pcc/Planar-v0", "pcc", 2.0**0.5): {"all": (14.5, 2.3), "top1": (29.7, 2.9)},
+    ("pcc/PendulumSwingUp-v0", "rce", 1.0): {"all": (6.4, 0.3), "top1": (8.1, 0.4)},
+    ("pcc/PendulumSwingUp-v0", "e2c", 1.0): {"all": (23.8, 1.2), "top1": (36.1, 0.3)},
+    ("pcc/PendulumSwingUp-v0", "pcc", 1.0): {"all": (16.4, 0.8), "top1": (29.5, 0.2)},
+    ("pcc/CartPole-v0", "rce", 1.0): {"all": (8.1, 0.6), "top1": (20.3, 11.0)},
+    ("pcc/CartPole-v0", "e2c", 1.0): {"all": (6.6, 0.4), "top1": (16.5, 0.4)},
+    ("pcc/CartPole-v0", "pcc", 1.0): {"all": (9.8, 0.7), "top1": (17.9, 0.8)},
+    ("pcc/ThreeLink-v0", "rce", 1.0): {"all": (0.3, 0.1), "top1": (1.3, 0.2)},
+    ("pcc/ThreeLink-v0", "e2c", 1.0): {"all": (0.0, 0.0), "top1": (0.0, 0.0)},
+    ("pcc/ThreeLink-v0", "pcc", 1.0): {"all": (0.5, 0.1), "top1": (1.8, 0.3)},
+}

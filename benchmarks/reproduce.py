@@ -1,0 +1,551 @@
+"""Reproduce the paper's tables with its reproducible protocol (N models x M control tasks).
+
+For every (env, method, noise, model seed) of a preset this script generates or loads the
+cached data set of that seed, trains the model, runs the control tasks and writes ONE JSON
+file per run (config, versions, training time, per-task percentages and true-state
+trajectories). Finished runs are skipped, so an interrupted grid resumes where it stopped;
+files are written atomically, so a killed run never leaves a partial result that counts.
+Then it aggregates every run file into ``summary.json`` and ``summary.md`` (mean and standard
+error over all tasks and for the top-1 model, IQM with a bootstrap interval across models,
+the paper's numbers beside ours, the oracle controller as the ceiling) and a bar chart.
+
+Examples:
+    python -m benchmarks.reproduce --preset quick
+    python -m benchmarks.reproduce --preset paper --envs pcc/Planar-v0 --workers 2
+    python -m benchmarks.reproduce --preset paper --backend ray --ray-address auto
+    python -m benchmarks.reproduce --aggregate-only
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.presets import PAPER_RESULTS, REPRODUCE_PRESETS, ReproducePreset
+
+DEFAULT_RESULTS_DIR = Path("pcc_results") / "reproduce"
+RESULT_FORMAT = 1
+ORACLE = "oracle"
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One cell of the grid: one model (or the oracle) and its control tasks."""
+
+    env_id: str
+    method: str
+    seed: int
+    noise_std: float
+    num_tasks: int
+    task_seed: int
+    model_variant: str
+    preset: str
+    num_samples: int | None = None
+    max_epochs: int | None = None
+
+    @property
+    def relative_path(self) -> Path:
+        """Where the run's JSON lives below the results directory."""
+        env = self.env_id.replace("/", "_")
+        noise = f"noise{self.noise_std!r}"
+        return Path("runs") / self.preset / env / noise / self.method / f"seed{self.seed}.json"
+
+
+def _versions() -> dict[str, str]:
+    import gymnasium
+    import stable_baselines3
+    import torch
+
+    import pcc_agent
+
+    return {
+        "pcc_control": pcc_agent.__version__,
+        "torch": torch.__version__,
+        "gymnasium": gymnasium.__version__,
+        "stable_baselines3": stable_baselines3.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+    }
+
+
+def _write_json_atomic(path: Path, payload: Any) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + f".{os.getpid()}.tmp")
+    with open(tmp, "w") as handle:
+        json.dump(payload, handle, indent=1)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, path)
+
+
+def load_finished_run(path: Path) -> dict[str, Any] | None:
+    """Return a finished run's record, or None if the file is missing, partial or stale."""
+    try:
+        with open(path) as handle:
+            record = json.load(handle)
+    except (OSError, json.JSONDecodeError):
+        return None
+    if record.get("format") != RESULT_FORMAT or record.get("status") != "done":
+        return None
+    return record
+
+
+def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = None) -> dict:
+    """Train one model and run its control tasks; write and return the run record.
+
+    Skips the work when a finished record for ``spec`` already exists.
+    """
+    import torch
+
+    path = Path(results_dir) / spec.relative_path
+    done = load_finished_run(path)
+    if done is not None:
+        done["skipped"] = True
+        return done
+    torch.set_num_threads(1)
+
+    from pcc_agent.evaluation import evaluate_control, task_seeds
+
+    env_kwargs = {"noise_std": spec.noise_std} if spec.noise_std else {}
+    seeds = task_seeds(spec.task_seed, spec.num_tasks)
+    record: dict[str, Any] = {
+        "format": RESULT_FORMAT,
+        "spec": asdict(spec),
+        "versions": _versions(),
+        "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count()},
+        "command": " ".join(sys.argv),
+    }
+    start = time.perf_counter()
+    if spec.method == ORACLE:
+        from pcc_agent.oracle import OracleController, oracle_config_for
+
+        config = oracle_config_for(spec.env_id)
+        record["config"] = {"oracle": asdict(config)}
+        record["train_seconds"] = 0.0
+        evaluation = evaluate_control(
+            lambda env: OracleController(env, config), spec.env_id, seeds, env_kwargs
+        )
+    else:
+        from pcc_agent.agent import PCCAgent
+        from pcc_agent.presets import get_preset
+
+        preset = get_preset(spec.env_id, spec.model_variant)
+        if spec.max_epochs is not None:
+            preset = replace(preset, train=replace(preset.train, epochs=spec.max_epochs))
+        if spec.num_samples is not None:
+            preset = replace(preset, data=replace(preset.data, num_samples=spec.num_samples))
+        agent = PCCAgent(
+            spec.env_id,
+            method=spec.method,
+            preset=preset,
+            seed=spec.seed,
+            env_kwargs=env_kwargs,
+            data_cache_dir=data_dir,
+        )
+        agent.learn(progress_bar=False)
+        record["train_seconds"] = time.perf_counter() - start
+        record["config"] = agent.config_dict()
+        record["training"] = agent.train_summary()
+        evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
+        _maybe_plot_latent_map(agent, spec, Path(results_dir))
+    record["eval_seconds"] = time.perf_counter() - start - record["train_seconds"]
+    record["task_seeds"] = seeds
+    record["percentages"] = [t.percent_in_goal for t in evaluation.tasks]
+    record["tasks"] = [t.to_dict() for t in evaluation.tasks]
+    record["mean"] = evaluation.mean
+    record["status"] = "done"
+    _write_json_atomic(path, record)
+    return record
+
+
+def _maybe_plot_latent_map(agent: Any, spec: RunSpec, results_dir: Path) -> None:
+    """Latent maps (paper Figure 2) for the first two models of Planar and Pendulum."""
+    if spec.seed >= 2 or spec.env_id not in ("pcc/Planar-v0", "pcc/PendulumSwingUp-v0"):
+        return
+    from pcc_agent.plots import plot_env_latent_map
+
+    out = results_dir / "latent_maps" / spec.preset
+    out.mkdir(parents=True, exist_ok=True)
+    name = f"{spec.env_id.split('/')[1]}_{spec.method}_noise{spec.noise_std!r}_seed{spec.seed}.png"
+    plot_env_latent_map(agent, out / name, title=f"{spec.method} seed {spec.seed}")
+
+
+def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[RunSpec]:
+    """All runs of a preset, oracle runs first (one per env and noise level)."""
+    runs: list[RunSpec] = []
+    for env_id in preset.envs:
+        for noise in preset.noise_levels:
+            common = {
+                "env_id": env_id,
+                "noise_std": float(noise),
+                "num_tasks": preset.num_tasks,
+                "task_seed": preset.task_seed,
+                "model_variant": preset.model_variant,
+                "preset": preset.name,
+            }
+            if include_oracle:
+                runs.append(RunSpec(method=ORACLE, seed=0, **common))
+            for seed in range(preset.num_models):
+                for method in preset.methods:
+                    runs.append(
+                        RunSpec(
+                            method=method,
+                            seed=seed,
+                            num_samples=preset.num_samples.get(env_id),
+                            max_epochs=preset.max_epochs,
+                            **common,
+                        )
+                    )
+    return runs
+
+
+def _worker_init() -> None:
+    import torch
+
+    torch.set_num_threads(1)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def run_grid(
+    runs: Sequence[RunSpec],
+    results_dir: Path,
+    workers: int,
+    backend: str = "process",
+    ray_address: str | None = None,
+    data_dir: str | None = None,
+) -> list[dict[str, Any]]:
+    """Execute the runs that are not finished yet, in a process pool or on Ray."""
+    todo = [r for r in runs if load_finished_run(results_dir / r.relative_path) is None]
+    print(f"{len(runs) - len(todo)} of {len(runs)} runs already finished; {len(todo)} to run.")
+    if not todo:
+        return []
+    records: list[dict[str, Any]] = []
+    if backend == "ray":
+        try:
+            import ray
+        except ImportError as exc:  # pragma: no cover - depends on the optional extra
+            raise SystemExit("--backend ray needs Ray: pip install 'pcc-control[ray]'") from exc
+        ray.init(address=ray_address, ignore_reinit_error=True)
+        remote = ray.remote(num_cpus=1)(_ray_task)
+        futures = [remote.remote(r, str(results_dir), data_dir) for r in todo]
+        for i, record in enumerate(ray.get(futures)):
+            records.append(record)
+            _report(i + 1, len(todo), record)
+        return records
+    if workers <= 1:
+        _worker_init()
+        for i, spec in enumerate(todo):
+            record = execute_run(spec, results_dir, data_dir)
+            records.append(record)
+            _report(i + 1, len(todo), record)
+        return records
+    with ProcessPoolExecutor(max_workers=workers, initializer=_worker_init) as pool:
+        futures = [pool.submit(execute_run, r, results_dir, data_dir) for r in todo]
+        for i, future in enumerate(as_completed(futures)):
+            record = future.result()
+            records.append(record)
+            _report(i + 1, len(todo), record)
+    return records
+
+
+def _ray_task(spec: RunSpec, results_dir: str, data_dir: str | None) -> dict[str, Any]:
+    _worker_init()
+    return execute_run(spec, results_dir, data_dir)
+
+
+def _report(i: int, n: int, record: dict[str, Any]) -> None:
+    spec = record["spec"]
+    print(
+        f"[{i}/{n}] {spec['env_id']} {spec['method']} noise={spec['noise_std']} "
+        f"seed={spec['seed']}: {record['mean']:.1f}% of steps in goal "
+        f"(train {record['train_seconds']:.0f}s, control {record['eval_seconds']:.0f}s)",
+        flush=True,
+    )
+
+
+# ---------------------------------------------------------------------------- aggregation
+def interquartile_mean(values: np.ndarray) -> float:
+    """Mean of the middle 50% of the values (rliable's IQM)."""
+    values = np.sort(np.asarray(values, dtype=np.float64).ravel())
+    n = values.size
+    lo, hi = int(math.floor(0.25 * n)), int(math.ceil(0.75 * n))
+    return float(values[lo:hi].mean()) if hi > lo else float(values.mean())
+
+
+def bootstrap_iqm_ci(
+    per_model: list[np.ndarray], reps: int = 2000, seed: int = 0
+) -> tuple[float, float]:
+    """95% bootstrap interval of the IQM, resampling models (then tasks within each model)."""
+    rng = np.random.default_rng(seed)
+    stats = np.empty(reps)
+    n = len(per_model)
+    for r in range(reps):
+        picks = rng.integers(0, n, n)
+        sample = [
+            per_model[i][rng.integers(0, len(per_model[i]), len(per_model[i]))] for i in picks
+        ]
+        stats[r] = interquartile_mean(np.concatenate(sample))
+    return float(np.percentile(stats, 2.5)), float(np.percentile(stats, 97.5))
+
+
+def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Summary rows per (env, method, noise, preset) from run records."""
+    groups: dict[tuple[str, str, float, str], list[dict[str, Any]]] = {}
+    for rec in records:
+        s = rec["spec"]
+        groups.setdefault((s["env_id"], s["method"], s["noise_std"], s["preset"]), []).append(rec)
+    oracle = {
+        (k[0], k[2], k[3]): float(np.mean(v[0]["percentages"]))
+        for k, v in groups.items()
+        if k[1] == ORACLE
+    }
+    rows = []
+    for (env_id, method, noise, preset), recs in sorted(groups.items()):
+        recs = sorted(recs, key=lambda r: r["spec"]["seed"])
+        per_model = [np.asarray(r["percentages"], dtype=np.float64) for r in recs]
+        all_tasks = np.concatenate(per_model)
+        means = np.array([m.mean() for m in per_model])
+        best = int(np.argmax(means))
+        top = per_model[best]
+
+        def se(x: np.ndarray) -> float:
+            return float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
+
+        row: dict[str, Any] = {
+            "env": env_id,
+            "method": method,
+            "noise_std": noise,
+            "preset": preset,
+            "model_variant": recs[0]["spec"]["model_variant"],
+            "n_models": len(recs),
+            "n_tasks": int(np.median([m.size for m in per_model])),
+            "seeds": [r["spec"]["seed"] for r in recs],
+            "mean_all": float(all_tasks.mean()),
+            "se_all": se(all_tasks),
+            "mean_top1": float(top.mean()),
+            "se_top1": se(top),
+            "top1_seed": recs[best]["spec"]["seed"],
+            "iqm": interquartile_mean(all_tasks),
+            "iqm_ci": list(bootstrap_iqm_ci(per_model)) if len(per_model) > 1 else None,
+            "oracle_mean": oracle.get((env_id, noise, preset)),
+            "train_seconds_mean": float(np.mean([r["train_seconds"] for r in recs])),
+            "settings": recs[0].get("config", {}),
+        }
+        paper = PAPER_RESULTS.get((env_id, method, noise))
+        row["paper_all"] = list(paper["all"]) if paper else None
+        row["paper_top1"] = list(paper["top1"]) if paper and "top1" in paper else None
+        rows.append(row)
+    return rows
+
+
+def _fmt(pair: Sequence[float] | None) -> str:
+    return "-" if pair is None else f"{pair[0]:.1f} ± {pair[1]:.1f}"
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """The summary as a Markdown table, our numbers beside the paper's."""
+    lines = [
+        "| env | method | noise | preset (variant) | models x tasks | ours: all | paper: all "
+        "| ours: top-1 | paper: top-1 | IQM [95% CI] | oracle |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        ci = r["iqm_ci"]
+        iqm = f"{r['iqm']:.1f}" + (f" [{ci[0]:.1f}, {ci[1]:.1f}]" if ci else "")
+        oracle = "-" if r["oracle_mean"] is None else f"{r['oracle_mean']:.1f}"
+        lines.append(
+            f"| {r['env']} | {r['method']} | {r['noise_std']:g} | {r['preset']} "
+            f"({r['model_variant']}) | {r['n_models']} x {r['n_tasks']} "
+            f"| {_fmt((r['mean_all'], r['se_all']))} | {_fmt(r['paper_all'])} "
+            f"| {_fmt((r['mean_top1'], r['se_top1']))} | {_fmt(r['paper_top1'])} | {iqm} "
+            f"| {oracle} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def settings_table(rows: list[dict[str, Any]]) -> str:
+    """The evaluation settings of every (env, preset): printed beside the results."""
+    seen: dict[tuple[str, str], dict[str, Any]] = {}
+    for r in rows:
+        if r["method"] != ORACLE and (r["env"], r["preset"]) not in seen:
+            seen[(r["env"], r["preset"])] = r["settings"]
+    lines = [
+        "| env | preset | episode length | plan length | iLQR iters (first / MPC) "
+        "| candidates | kappa (Q = kappa I) | R | action bounds | data size |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (env, preset), s in seen.items():
+        p = s.get("planner", {})
+        lines.append(
+            f"| {env} | {preset} | {s.get('episode_length', '-')} | {p.get('plan_length')} "
+            f"| {p.get('iterations')} / {p.get('mpc_iterations')} | {p.get('num_candidates')} "
+            f"| {p.get('kappa')} | {p.get('r_weight')} I "
+            f"| [{p.get('action_low')}, {p.get('action_high')}] "
+            f"| {s.get('data', {}).get('num_samples')} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def load_records(results_dir: Path) -> list[dict[str, Any]]:
+    """Every finished run record below ``results_dir``."""
+    records = []
+    for path in sorted((results_dir / "runs").rglob("*.json")):
+        rec = load_finished_run(path)
+        if rec is not None:
+            records.append(rec)
+    return records
+
+
+def write_summary(results_dir: Path) -> list[dict[str, Any]]:
+    """Aggregate the run files into summary.json, summary.md and a bar chart."""
+    rows = aggregate(load_records(results_dir))
+    if not rows:
+        print("No finished runs to aggregate.")
+        return rows
+    _write_json_atomic(results_dir / "summary.json", rows)
+    text = (
+        "# Percentage of steps in goal (true state), ours beside the paper's\n\n"
+        "Mean ± standard error over all tasks of all models (`all`) and over the best model's "
+        "tasks (`top-1`). The paper's LaneKeeping numbers are its TORCS domain.\n\n"
+        + markdown_table(rows)
+        + "\n## Evaluation settings\n\n"
+        + settings_table(rows)
+    )
+    (results_dir / "summary.md").write_text(text)
+    _bar_chart(rows, results_dir / "summary.png")
+    print(text)
+    print(f"Wrote {results_dir / 'summary.json'}, summary.md and summary.png")
+    return rows
+
+
+def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in rows if r["method"] != ORACLE]
+    if not rows:
+        return
+    labels = [f"{r['env'].split('/')[1]}\n{r['method']}\n{r['preset']}" for r in rows]
+    x = np.arange(len(rows))
+    fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(rows)), 4))
+    ax.bar(
+        x - 0.2,
+        [r["mean_all"] for r in rows],
+        0.4,
+        yerr=[r["se_all"] for r in rows],
+        label="ours (all models)",
+        capsize=3,
+    )
+    paper = [r["paper_all"][0] if r["paper_all"] else np.nan for r in rows]
+    paper_se = [r["paper_all"][1] if r["paper_all"] else 0 for r in rows]
+    ax.bar(x + 0.2, paper, 0.4, yerr=paper_se, label="paper (all models)", capsize=3)
+    for xi, r in zip(x, rows):
+        if r["oracle_mean"] is not None:
+            ax.hlines(r["oracle_mean"], xi - 0.45, xi + 0.45, colors="k", linestyles="--")
+    ax.set_xticks(x, labels, fontsize=7)
+    ax.set_ylabel("% of steps in goal")
+    ax.set_title("Control from pixels (dashed: oracle on the true state)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def estimate_seconds(runs: Sequence[RunSpec]) -> float:
+    """A rough cost estimate (CPU, one core per run) from measured per-env training times."""
+    per_run = {"pcc/Planar-v0": 120, "pcc/PendulumSwingUp-v0": 600, "pcc/PendulumBalance-v0": 600}
+    total = 0.0
+    for r in runs:
+        if r.method == ORACLE:
+            total += 60
+            continue
+        base = per_run.get(r.env_id, 900 if r.model_variant == "fast" else 14400)
+        total += base
+    return total
+
+
+# ---------------------------------------------------------------------------- command line
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface."""
+    parser = argparse.ArgumentParser(
+        prog="pcc reproduce",
+        description="Reproduce the PCC paper's tables: N models x M control tasks per "
+        "(env, method), resumable, aggregated into summary.json / summary.md.",
+    )
+    parser.add_argument("--preset", default="quick", choices=sorted(REPRODUCE_PRESETS))
+    parser.add_argument("--envs", nargs="+", help="Subset of the preset's env ids.")
+    parser.add_argument("--methods", nargs="+", help="Subset / override of the methods.")
+    parser.add_argument("--num-models", type=int, help="Override the number of models.")
+    parser.add_argument("--num-tasks", type=int, help="Override the number of tasks per model.")
+    parser.add_argument("--max-epochs", type=int, help="Override the training epoch cap.")
+    parser.add_argument("--noise", type=float, nargs="+", help="Override the noise levels.")
+    parser.add_argument("--no-oracle", action="store_true", help="Skip the oracle ceiling.")
+    parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
+    parser.add_argument(
+        "--data-dir",
+        default=None,
+        help="Dataset cache (default: PCC_DATA_DIR or ~/.cache/pcc_control/datasets).",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="Parallel runs (one core each) for the process backend.",
+    )
+    parser.add_argument("--backend", choices=("process", "ray"), default="process")
+    parser.add_argument("--ray-address", default=None, help="Ray cluster address (e.g. 'auto').")
+    parser.add_argument(
+        "--aggregate-only",
+        action="store_true",
+        help="Only rebuild the summary from existing run files.",
+    )
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m benchmarks.reproduce`` and ``pcc reproduce``."""
+    args = build_parser().parse_args(argv)
+    results_dir: Path = args.results_dir
+    if not args.aggregate_only:
+        preset = REPRODUCE_PRESETS[args.preset]
+        changes: dict[str, Any] = {}
+        if args.envs:
+            changes["envs"] = tuple(args.envs)
+        if args.methods:
+            changes["methods"] = tuple(args.methods)
+        if args.num_models is not None:
+            changes["num_models"] = args.num_models
+        if args.num_tasks is not None:
+            changes["num_tasks"] = args.num_tasks
+        if args.max_epochs is not None:
+            changes["max_epochs"] = args.max_epochs
+        if args.noise:
+            changes["noise_levels"] = tuple(args.noise)
+        preset = preset.replace(**changes)
+        runs = expand_grid(preset, include_oracle=not args.no_oracle)
+        hours = estimate_seconds(runs) / 3600 / max(1, args.workers)
+        print(
+            f"Preset {preset.name!r}: {len(runs)} runs, estimated {hours:.1f} h on "
+            f"{args.workers} CPU worker(s) (rough; CNN 'paper' models want a GPU)."
+        )
+        run_grid(runs, results_dir, args.workers, args.backend, args.ray_address, args.data_dir)
+    write_summary(results_dir)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,331 @@
+"""Side by side with Stable-Baselines3: SAC on the same images, the same tasks, the same metric.
+
+For one env, this trains SB3's SAC with ``CnnPolicy`` on our uint8 image observations (and,
+as a reference, SAC with ``MlpPolicy`` on the TRUE state), evaluating it at several numbers of
+environment samples (the learning curve) with :func:`pcc_agent.evaluation.evaluate_control`:
+the same function, task seeds and metric (percentage of steps in goal) as the reproduction
+pipeline. The PCC / E2C / RCE points (at their data-set sizes) and the oracle ceiling are
+read from the reproduction pipeline's run files for the same env and task seeds.
+
+Every (env, policy, seed) run writes one JSON file (resumable: finished runs are skipped).
+
+Replay buffer: one transition of an 80x80x2 observation costs 2 x 12.8 kB (obs and next obs,
+uint8), so the default buffer of 100,000 transitions takes about 2.6 GB; 40x40 and 48x48
+observations need 3-4x less. ``--buffer-size`` changes it.
+
+Examples:
+    python -m benchmarks.vs_sac --env pcc/Planar-v0 --steps 20000 --checkpoints 2000 5000 \
+        10000 20000 --seeds 0 1 2
+    python -m benchmarks.vs_sac --env pcc/Planar-v0 --aggregate-only
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from benchmarks.presets import REPRODUCE_PRESETS
+from benchmarks.reproduce import ORACLE, _write_json_atomic, load_records
+
+DEFAULT_RESULTS_DIR = Path("pcc_results") / "vs_sac"
+DEFAULT_REPRODUCE_DIR = Path("pcc_results") / "reproduce"
+FORMAT = 1
+
+
+class TrueStateObservation(gym.ObservationWrapper):
+    """Replace the image observation by the env's true state (float32), for the reference SAC."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        dim = env.unwrapped.state_dim
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (dim,), dtype=np.float32)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """The true state as float32."""
+        return self.env.unwrapped.state.astype(np.float32)
+
+
+def make_env(env_id: str, observation: str) -> gym.Env:
+    """The env as SAC sees it: images (``"image"``) or the true state (``"state"``)."""
+    import pcc_envs  # noqa: F401
+
+    env = gym.make(env_id)
+    return TrueStateObservation(env) if observation == "state" else env
+
+
+def run_sac(
+    env_id: str,
+    observation: str,
+    seed: int,
+    steps: int,
+    checkpoints: Sequence[int],
+    task_seed_list: Sequence[int],
+    buffer_size: int,
+    results_dir: Path,
+) -> dict[str, Any]:
+    """Train one SAC agent, evaluating it at every checkpoint; write and return its record."""
+    import torch
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from pcc_agent.evaluation import evaluate_control
+
+    path = (
+        results_dir / "runs" / env_id.replace("/", "_") / f"sac_{observation}" / f"seed{seed}.json"
+    )
+    if path.exists():
+        record = json.loads(path.read_text())
+        if record.get("status") == "done" and record.get("steps") == steps:
+            return record
+    policy = "CnnPolicy" if observation == "image" else "MlpPolicy"
+    env = make_env(env_id, observation)
+    model = SAC(
+        policy,
+        env,
+        buffer_size=min(buffer_size, steps),
+        learning_starts=min(1000, steps // 10),
+        seed=seed,
+        device="auto",
+        verbose=0,
+    )
+    curve: list[dict[str, Any]] = []
+    wanted = sorted({c for c in checkpoints if c <= steps} | {steps})
+
+    class EvalAtCheckpoints(BaseCallback):
+        def _on_step(self) -> bool:
+            if wanted and self.num_timesteps >= wanted[0]:
+                wanted.pop(0)
+                start = time.perf_counter()
+                ev = evaluate_control(
+                    lambda e: make_policy_view(self.model, e, observation),
+                    env_id,
+                    task_seed_list,
+                    record_states=False,
+                )
+                curve.append(
+                    {
+                        "env_steps": self.num_timesteps,
+                        "percentages": ev.percentages.tolist(),
+                        "mean": ev.mean,
+                        "se": ev.standard_error,
+                        "eval_seconds": time.perf_counter() - start,
+                    }
+                )
+                print(
+                    f"  {env_id} SAC({observation}) seed {seed} @ {self.num_timesteps} steps: "
+                    f"{ev.mean:.1f}% in goal",
+                    flush=True,
+                )
+            return True
+
+    start = time.perf_counter()
+    model.learn(total_timesteps=steps, callback=EvalAtCheckpoints())
+    record = {
+        "format": FORMAT,
+        "status": "done",
+        "env_id": env_id,
+        "policy": f"SAC {policy} ({observation})",
+        "observation": observation,
+        "seed": seed,
+        "steps": steps,
+        "buffer_size": min(buffer_size, steps),
+        "train_seconds": time.perf_counter() - start,
+        "curve": curve,
+        "task_seeds": list(task_seed_list),
+        "torch_threads": torch.get_num_threads(),
+        "machine": platform.platform(),
+        "command": " ".join(sys.argv),
+    }
+    _write_json_atomic(path, record)
+    return record
+
+
+class _StatePolicy:
+    """SB3 model trained on true states, evaluated on the image env (reads the true state)."""
+
+    def __init__(self, model: Any, env: gym.Env) -> None:
+        self.model, self.env = model, env
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        """Act on the env's true state instead of the image observation."""
+        s = self.env.unwrapped.state.astype(np.float32)[None]
+        action, _ = self.model.predict(s, deterministic=deterministic)
+        return action, state
+
+
+def make_policy_view(model: Any, env: gym.Env, observation: str) -> Any:
+    """The object evaluate_control drives: the model itself, or its true-state view."""
+    return model if observation == "image" else _StatePolicy(model, env)
+
+
+def _se(x: np.ndarray) -> float:
+    return float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
+
+
+def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, Any]:
+    """Learning curves (mean and SE over seeds) and the model-based points, as one dict."""
+    curves: dict[str, Any] = {}
+    run_dir = results_dir / "runs" / env_id.replace("/", "_")
+    for sub in sorted(run_dir.glob("sac_*")) if run_dir.exists() else []:
+        records = [json.loads(p.read_text()) for p in sorted(sub.glob("seed*.json"))]
+        points: dict[int, list[float]] = {}
+        for rec in records:
+            for point in rec["curve"]:
+                points.setdefault(point["env_steps"], []).append(point["mean"])
+        curves[sub.name] = [
+            {
+                "env_steps": steps,
+                "mean": float(np.mean(v)),
+                "se": _se(np.asarray(v)),
+                "n_seeds": len(v),
+            }
+            for steps, v in sorted(points.items())
+        ]
+    model_based: dict[str, Any] = {}
+    for rec in load_records(reproduce_dir) if reproduce_dir.exists() else []:
+        spec = rec["spec"]
+        if spec["env_id"] != env_id or spec["noise_std"] != 0.0:
+            continue
+        entry = model_based.setdefault(
+            spec["method"], {"percentages": [], "num_samples": None, "preset": spec["preset"]}
+        )
+        entry["percentages"].extend(rec["percentages"])
+        entry["num_samples"] = rec.get("config", {}).get("data", {}).get("num_samples")
+    for entry in model_based.values():
+        values = np.asarray(entry.pop("percentages"))
+        entry.update(mean=float(values.mean()), se=_se(values), n_tasks=int(values.size))
+    return {"env": env_id, "sac": curves, "model_based": model_based}
+
+
+def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
+    """JSON, Markdown table and learning-curve PNG for one env."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    name = summary["env"].split("/")[1]
+    _write_json_atomic(results_dir / f"{name}.json", summary)
+    lines = [
+        f"## {summary['env']}\n",
+        "| method | env samples | % steps in goal (mean ± SE) | n |",
+        "|---|---|---|---|",
+    ]
+    for method, entry in sorted(summary["model_based"].items()):
+        samples = "- (true dynamics)" if method == ORACLE else entry["num_samples"]
+        lines.append(
+            f"| {method} ({entry['preset']}) | {samples} | {entry['mean']:.1f} ± {entry['se']:.1f} "
+            f"| {entry['n_tasks']} tasks |"
+        )
+    for policy, curve in sorted(summary["sac"].items()):
+        for p in curve:
+            lines.append(
+                f"| {policy} | {p['env_steps']} | {p['mean']:.1f} ± {p['se']:.1f} "
+                f"| {p['n_seeds']} seeds |"
+            )
+    (results_dir / f"{name}.md").write_text("\n".join(lines) + "\n")
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for policy, curve in sorted(summary["sac"].items()):
+        x = [p["env_steps"] for p in curve]
+        y = np.array([p["mean"] for p in curve])
+        e = np.array([p["se"] for p in curve])
+        ax.plot(x, y, marker="o", label=policy.replace("_", " "))
+        ax.fill_between(x, y - e, y + e, alpha=0.2)
+    for method, entry in sorted(summary["model_based"].items()):
+        if method == ORACLE:
+            ax.axhline(entry["mean"], color="k", linestyle="--", label="oracle (true dynamics)")
+        elif entry["num_samples"]:
+            ax.errorbar(
+                entry["num_samples"],
+                entry["mean"],
+                yerr=entry["se"],
+                fmt="s",
+                capsize=3,
+                label=method,
+            )
+    ax.set_xscale("log")
+    ax.set_xlabel("environment samples")
+    ax.set_ylabel("% of steps in goal")
+    ax.set_title(f"{summary['env']}: SAC vs embed-to-control")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(results_dir / f"{name}.png", dpi=120)
+    plt.close(fig)
+    print("\n".join(lines))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="pcc/Planar-v0")
+    parser.add_argument("--steps", type=int, default=100_000, help="SAC environment steps.")
+    parser.add_argument(
+        "--checkpoints",
+        type=int,
+        nargs="+",
+        default=None,
+        help="Env-step counts at which SAC is evaluated (default: the PCC "
+        "data-set size and 4 log-spaced points up to --steps).",
+    )
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument(
+        "--observations", nargs="+", default=["image", "state"], choices=["image", "state"]
+    )
+    parser.add_argument("--num-tasks", type=int, default=REPRODUCE_PRESETS["paper"].num_tasks)
+    parser.add_argument("--buffer-size", type=int, default=100_000)
+    parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
+    parser.add_argument(
+        "--reproduce-dir",
+        type=Path,
+        default=DEFAULT_REPRODUCE_DIR,
+        help="Where the reproduction pipeline's run files are (PCC points).",
+    )
+    parser.add_argument("--threads", type=int, default=max(1, (os.cpu_count() or 1)))
+    parser.add_argument("--aggregate-only", action="store_true")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m benchmarks.vs_sac``."""
+    args = build_parser().parse_args(argv)
+    import torch
+
+    from pcc_agent.evaluation import task_seeds
+    from pcc_agent.presets import get_preset
+
+    torch.set_num_threads(args.threads)
+    if not args.aggregate_only:
+        dataset_size = get_preset(args.env).data.num_samples
+        checkpoints = args.checkpoints or sorted(
+            {dataset_size, *np.geomspace(1000, args.steps, 4).astype(int).tolist()}
+        )
+        seeds = task_seeds(REPRODUCE_PRESETS["paper"].task_seed, args.num_tasks)
+        for observation in args.observations:
+            for seed in args.seeds:
+                run_sac(
+                    args.env,
+                    observation,
+                    seed,
+                    args.steps,
+                    checkpoints,
+                    seeds,
+                    args.buffer_size,
+                    args.results_dir,
+                )
+    write_outputs(summarize(args.env, args.results_dir, args.reproduce_dir), args.results_dir)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,533 @@
+"""``PCCAgent``: learn a controllable embedding from images, control it with latent iLQR-MPC.
+
+The agent follows Stable-Baselines3's public contract (``learn -> self``, ``predict(obs,
+state, episode_start, deterministic) -> (action, state)``, ``save``, ``load``, ``get_env``,
+``logger``, ``num_timesteps``) so that ``evaluate_policy``, ``EvalCallback`` and
+``CheckpointCallback`` work on it unchanged.
+
+Example:
+    >>> import gymnasium as gym
+    >>> import pcc_envs  # noqa: F401
+    >>> from pcc_agent import PCCAgent
+    >>> agent = PCCAgent("pcc/Planar-v0", method="pcc", seed=0)  # doctest: +SKIP
+    >>> agent.learn(total_timesteps=5000)  # doctest: +SKIP
+    >>> obs, _ = agent.env.reset(seed=1)  # doctest: +SKIP
+    >>> action, state = agent.predict(obs)  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
+from stable_baselines3.common.logger import Logger, configure
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
+
+import pcc_agent
+from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_weights, save_checkpoint
+from pcc_agent.losses import METHODS, model_config_for_method
+from pcc_agent.model import EmbeddingModel
+from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.planning.cost import QuadraticCost
+from pcc_agent.planning.dynamics import ModelDynamics
+from pcc_agent.planning.ilqr import plan
+from pcc_agent.presets import (
+    DataConfig,
+    EnvPreset,
+    ModelConfig,
+    TrainConfig,
+    default_preset_for_spaces,
+    get_preset,
+)
+from pcc_agent.training import TrainResult, resolve_device, train_embedding
+
+__all__ = ["PCCAgent", "collect_random_rollouts"]
+
+
+def collect_random_rollouts(
+    env: gym.Env, num_samples: int, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Transitions ``(obs, action, next_obs)`` from uniformly random actions.
+
+    The fallback for environments that do not offer the paper's uniform state sampler.
+    """
+    rng = np.random.default_rng(seed)
+    env.action_space.seed(int(rng.integers(2**31)))
+    obs_list, act_list, next_list = [], [], []
+    obs, _ = env.reset(seed=int(rng.integers(2**31)))
+    while len(obs_list) < num_samples:
+        action = env.action_space.sample()
+        next_obs, _, terminated, truncated, _ = env.step(action)
+        obs_list.append(obs)
+        act_list.append(action)
+        next_list.append(next_obs)
+        obs = next_obs
+        if terminated or truncated:
+            obs, _ = env.reset()
+    return (
+        np.asarray(obs_list, dtype=np.uint8),
+        np.asarray(act_list, dtype=np.float32),
+        np.asarray(next_list, dtype=np.uint8),
+    )
+
+
+class PCCAgent:
+    """Embed-to-control agent: an embedding model (PCC, E2C, RCE or an ablation) + latent MPC.
+
+    Args:
+        env: A Gymnasium env or a registered id (``"pcc/Planar-v0"``). Observations must be
+            ``uint8`` images ``(frames, H, W)`` and actions a ``Box``.
+        method: ``"pcc"``, ``"e2c"``, ``"rce"``, ``"pcc-no-consistency"``,
+            ``"pcc-no-curvature"`` or ``"pcc-amortized"``.
+        preset: An :class:`~pcc_agent.presets.EnvPreset`, a variant name (``"paper"`` or
+            ``"fast"``) of the env's preset, or None (the env's ``"paper"`` preset, or a
+            default built from the spaces for a foreign env).
+        seed: Seed of the model initialization, data set, training and planner; None draws one.
+        device: ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
+        goal_obs: Observation of the goal; default ``env.unwrapped.goal_observation()``.
+        planner: Overrides the preset's planner settings.
+        env_kwargs: Keyword arguments of ``gym.make`` when ``env`` is an id.
+        data_cache_dir: Data-set cache directory (default ``$PCC_DATA_DIR`` or
+            ``~/.cache/pcc_control/datasets``).
+        verbose: 0 silent, 1 progress messages.
+        tensorboard_log: Directory of SB3 logger output (stdout, CSV, TensorBoard if installed).
+    """
+
+    def __init__(
+        self,
+        env: gym.Env | str,
+        method: str = "pcc",
+        preset: EnvPreset | str | None = None,
+        seed: int | None = None,
+        device: str | torch.device = "auto",
+        goal_obs: np.ndarray | None = None,
+        planner: PlannerConfig | None = None,
+        env_kwargs: dict[str, Any] | None = None,
+        data_cache_dir: str | os.PathLike[str] | None = None,
+        verbose: int = 0,
+        tensorboard_log: str | None = None,
+    ) -> None:
+        if method not in METHODS:
+            raise ValueError(f"Unknown method {method!r}; choose one of {sorted(METHODS)}.")
+        self.env_kwargs = dict(env_kwargs or {})
+        self.env: gym.Env | None = None
+        self._vec_env: VecEnv | None = None
+        self.method = method
+        self.seed = int(np.random.SeedSequence().entropy % 2**31) if seed is None else int(seed)
+        self.device = resolve_device(device)
+        self.verbose = verbose
+        self.tensorboard_log = tensorboard_log
+        self.data_cache_dir = data_cache_dir
+        self.num_timesteps = 0
+        self.train_result: TrainResult | None = None
+        self._logger: Logger | None = None
+        if env is not None:
+            self.set_env(env)
+        assert self.env is not None
+        self.env_id = self.env.spec.id if self.env.spec is not None else "custom"
+        self.preset = self._resolve_preset(preset)
+        if planner is not None:
+            self.preset = dataclasses.replace(self.preset, planner=planner)
+        obs_shape = self.env.observation_space.shape
+        self.obs_shape: tuple[int, ...] = tuple(int(s) for s in obs_shape)
+        self.action_dim = int(self.env.action_space.shape[0])
+        model_config = model_config_for_method(self.preset.model, method)
+        self.preset = dataclasses.replace(self.preset, model=model_config)
+        self.model = self._build_model(model_config)
+        self._goal_obs = None if goal_obs is None else self._check_obs(goal_obs, single=True)
+        self._plan_generator = torch.Generator().manual_seed(self.seed)
+
+    # ------------------------------------------------------------------ set-up helpers
+    def _resolve_preset(self, preset: EnvPreset | str | None) -> EnvPreset:
+        if isinstance(preset, EnvPreset):
+            return preset
+        variant = preset or "paper"
+        try:
+            return get_preset(self.env_id, variant)
+        except ValueError:
+            if preset is not None and self.env_id.startswith("pcc/"):
+                raise
+            return default_preset_for_spaces(
+                self.env.observation_space, self.env.action_space, self.env_id
+            )
+
+    def _build_model(self, config: ModelConfig) -> EmbeddingModel:
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(self.seed)
+            model = EmbeddingModel(self.obs_shape, self.action_dim, config)
+        return model.to(self.device)
+
+    def set_env(self, env: gym.Env | str) -> None:
+        """Attach an environment (SB3 ``set_env``); it must have the model's spaces."""
+        if isinstance(env, str):
+            import pcc_envs  # noqa: F401  (registers the ids)
+
+            env = gym.make(env, **self.env_kwargs)
+        if isinstance(env, VecEnv):
+            raise TypeError(
+                "PCCAgent takes a single gymnasium env (it wraps it in a DummyVecEnv itself); "
+                "pass env.envs[0] or the env id."
+            )
+        obs_space = env.observation_space
+        if not (
+            isinstance(obs_space, gym.spaces.Box)
+            and obs_space.dtype == np.uint8
+            and len(obs_space.shape) == 3
+        ):
+            raise ValueError(
+                f"PCCAgent needs uint8 image observations (frames, H, W), got {obs_space}."
+            )
+        if not isinstance(env.action_space, gym.spaces.Box) or len(env.action_space.shape) != 1:
+            raise ValueError(f"PCCAgent needs a flat Box action space, got {env.action_space}.")
+        if hasattr(self, "obs_shape") and tuple(obs_space.shape) != self.obs_shape:
+            raise ValueError(
+                f"The env's observations have shape {obs_space.shape}, the model was built "
+                f"for {self.obs_shape}."
+            )
+        self.env = env
+        self._vec_env = DummyVecEnv([lambda: env])
+
+    def get_env(self) -> VecEnv | None:
+        """The training environment as a VecEnv (what SB3 callbacks expect)."""
+        return self._vec_env
+
+    def get_vec_normalize_env(self) -> None:
+        """SB3 compatibility: the agent never normalizes observations."""
+        return None
+
+    @property
+    def logger(self) -> Logger:
+        """SB3 logger (stdout, plus CSV/TensorBoard under ``tensorboard_log``)."""
+        if self._logger is None:
+            formats = ["stdout"] if self.verbose else []
+            if self.tensorboard_log:
+                formats += ["csv"]
+            self._logger = configure(self.tensorboard_log, formats)
+        return self._logger
+
+    def set_logger(self, logger: Logger) -> None:
+        """Use another SB3 logger."""
+        self._logger = logger
+
+    def dump_logs(self) -> None:
+        """Write the logger's pending values (SB3 compatibility)."""
+        self.logger.dump(self.num_timesteps)
+
+    # ------------------------------------------------------------------ learning
+    def _collect(self, num_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        core = self.env.unwrapped
+        if self.env_id.startswith("pcc/") and hasattr(core, "sample_state"):
+            from pcc_envs.data import load_or_collect
+
+            kwargs = {k: v for k, v in self.env_kwargs.items() if k != "noise_std"}
+            data = load_or_collect(
+                self.env_id,
+                num_samples,
+                seed=self.seed,
+                noise_std=float(getattr(core, "noise_std", 0.0)),
+                env_kwargs=kwargs or None,
+                cache_dir=self.data_cache_dir,
+            )
+            return data.obs, data.action, data.next_obs
+        return collect_random_rollouts(self.env, num_samples, self.seed)
+
+    def learn(
+        self,
+        total_timesteps: int | None = None,
+        callback: Any = None,
+        log_interval: int = 1,
+        progress_bar: bool = False,
+        reset_num_timesteps: bool = True,
+        dataset: Any = None,
+        tb_log_name: str = "PCC",
+    ) -> PCCAgent:
+        """Collect transitions, train the embedding, set the goal.
+
+        Args:
+            total_timesteps: Transitions to collect with the env's sampler (the paper's
+                uniform protocol; random-policy rollouts for a foreign env). Default: the
+                preset's data size.
+            callback: SB3 callback(s) or a function ``(locals, globals) -> bool``. One callback
+                step is one training epoch; returning False stops training.
+            log_interval: Epochs between logger dumps.
+            progress_bar: Show a progress bar over epochs with the loss terms.
+            reset_num_timesteps: Reset ``num_timesteps`` (the number of transitions used).
+            dataset: Train on these transitions instead of collecting: a
+                ``pcc_envs.data.TransitionDataset`` or a tuple ``(obs, action, next_obs)``.
+            tb_log_name: Unused, SB3 compatibility.
+
+        Returns:
+            self.
+        """
+        if dataset is not None:
+            if isinstance(dataset, tuple):
+                obs, action, next_obs = dataset
+            else:
+                obs, action, next_obs = dataset.obs, dataset.action, dataset.next_obs
+        else:
+            n = self.preset.data.num_samples if total_timesteps is None else int(total_timesteps)
+            if n < 2:
+                raise ValueError(f"total_timesteps must be >= 2, got {n}.")
+            obs, action, next_obs = self._collect(n)
+        self._check_obs(obs[:1], single=False)
+        if reset_num_timesteps:
+            self.num_timesteps = 0
+        self.num_timesteps += len(obs)
+        if self._goal_obs is None and hasattr(self.env.unwrapped, "goal_observation"):
+            self._goal_obs = self._check_obs(self.env.unwrapped.goal_observation(), single=True)
+        sb3_callback = self._init_callback(callback)
+        if sb3_callback is not None:
+            sb3_callback.on_training_start(locals(), globals())
+
+        def on_epoch(epoch: int, metrics: dict[str, float]) -> bool:
+            for key, value in metrics.items():
+                self.logger.record(f"train/{key}", value)
+            self.logger.record("train/epoch", epoch)
+            if log_interval and epoch % log_interval == 0 and self.verbose:
+                self.logger.dump(self.num_timesteps)
+            if sb3_callback is None:
+                return True
+            sb3_callback.update_locals(locals())
+            return bool(sb3_callback.on_step())
+
+        self.train_result = train_embedding(
+            self.model,
+            (obs, action, next_obs),
+            self.preset.train,
+            method=self.method,
+            device=self.device,
+            seed=self.seed,
+            progress_bar=progress_bar,
+            epoch_callback=on_epoch,
+        )
+        if sb3_callback is not None:
+            sb3_callback.on_training_end()
+        if self._goal_obs is None:
+            raise ValueError(
+                "No goal: this env has no goal_observation(); pass goal_obs= to PCCAgent or "
+                "call set_goal(obs) before predict()."
+            )
+        return self
+
+    def _init_callback(self, callback: Any) -> BaseCallback | None:
+        if callback is None:
+            return None
+        if isinstance(callback, list):
+            callback = CallbackList(callback)
+        if not isinstance(callback, BaseCallback):
+            callback = ConvertCallback(callback)
+        callback.init_callback(self)  # type: ignore[arg-type]
+        return callback
+
+    # ------------------------------------------------------------------ control
+    def set_goal(self, goal_obs: np.ndarray) -> None:
+        """Set the goal observation the planner steers to."""
+        self._goal_obs = self._check_obs(goal_obs, single=True)
+
+    @property
+    def goal_observation(self) -> np.ndarray | None:
+        """The goal observation (a copy), or None before ``learn``."""
+        return None if self._goal_obs is None else self._goal_obs.copy()
+
+    def _check_obs(self, observation: Any, single: bool | None = None) -> np.ndarray:
+        obs = np.asarray(observation)
+        if obs.dtype != np.uint8:
+            raise ValueError(
+                f"Observations must be uint8 images in [0, 255] (got dtype {obs.dtype}); pass the "
+                "env's observations unchanged (no normalization or float conversion)."
+            )
+        ok_single = obs.shape == self.obs_shape
+        ok_batch = obs.ndim == len(self.obs_shape) + 1 and obs.shape[1:] == self.obs_shape
+        if (
+            (single is True and not ok_single)
+            or (single is False and not ok_batch)
+            or not (ok_single or ok_batch)
+        ):
+            raise ValueError(
+                f"Observation has shape {obs.shape}; expected {self.obs_shape} or a batch "
+                f"(n_envs, *{self.obs_shape}). Check the frame stacking and channel order "
+                "(channels first)."
+            )
+        return obs
+
+    def _cost(self, goal: torch.Tensor) -> QuadraticCost:
+        return QuadraticCost.from_config(self.preset.planner, goal, self.action_dim)
+
+    @torch.no_grad()
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: np.ndarray | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Plan with latent iLQR-MPC and return the first action.
+
+        Args:
+            observation: One observation ``(frames, H, W)`` or a batch ``(n, frames, H, W)``.
+            state: The MPC warm start returned by the previous call (shifted plans
+                ``(n, T, action_dim)``), or None at the start.
+            episode_start: Booleans ``(n,)``: True where an episode starts (its warm start is
+                dropped and it plans from scratch).
+            deterministic: Unused: the MPC policy is deterministic given the seed.
+
+        Returns:
+            ``(action, state)``: actions inside the action space, ``(action_dim,)`` or
+            ``(n, action_dim)``, and the warm start to pass back next call.
+        """
+        obs = self._check_obs(observation)
+        if self._goal_obs is None:
+            raise RuntimeError("No goal set: call learn() or set_goal(goal_obs) first.")
+        single = obs.shape == self.obs_shape
+        batch = obs[None] if single else obs
+        n = batch.shape[0]
+        self.model.eval()
+        both = torch.as_tensor(np.concatenate([batch, self._goal_obs[None]]), device=self.device)
+        z_all, _ = self.model.encode(both)
+        z0, goal = z_all[:n], z_all[n]
+        cost = self._cost(goal)
+        dynamics = ModelDynamics(self.model)
+        config = self.preset.planner
+        fresh = np.ones(n, dtype=bool)
+        warm = None
+        if state is not None:
+            warm_np = np.asarray(state, dtype=np.float32)
+            if warm_np.shape == (n, config.plan_length, self.action_dim):
+                warm = torch.as_tensor(warm_np, device=self.device)
+                fresh = np.zeros(n, dtype=bool)
+        if episode_start is not None:
+            fresh |= np.asarray(episode_start, dtype=bool).reshape(-1)[:n]
+        u_plan = torch.empty(n, config.plan_length, self.action_dim, device=self.device)
+        if fresh.any():
+            idx = torch.as_tensor(np.flatnonzero(fresh), device=self.device)
+            result = plan(dynamics, cost, z0[idx], config, self._plan_generator)
+            u_plan[idx] = result.u.to(u_plan.dtype)
+        if (~fresh).any():
+            idx = torch.as_tensor(np.flatnonzero(~fresh), device=self.device)
+            result = plan(dynamics, cost, z0[idx], config, self._plan_generator, warm[idx])
+            u_plan[idx] = result.u.to(u_plan.dtype)
+        low = torch.as_tensor(self.env.action_space.low, device=self.device)
+        high = torch.as_tensor(self.env.action_space.high, device=self.device)
+        actions = torch.clamp(u_plan[:, 0], low, high).cpu().numpy().astype(np.float32)
+        next_state = torch.cat([u_plan[:, 1:], u_plan[:, -1:]], dim=1).cpu().numpy()
+        return (actions[0] if single else actions), next_state
+
+    # ------------------------------------------------------------------ persistence
+    def config_dict(self) -> dict[str, Any]:
+        """Everything that defines this agent, JSON-serializable."""
+        return {
+            "env_id": self.env_id,
+            "method": self.method,
+            "seed": self.seed,
+            "env_kwargs": self.env_kwargs,
+            "model": self.preset.model.to_dict(),
+            "train": self.preset.train.to_dict(),
+            "data": dataclasses.asdict(self.preset.data),
+            "planner": dataclasses.asdict(self.preset.planner),
+            "episode_length": getattr(self.env.spec, "max_episode_steps", None),
+            "observation_shape": list(self.obs_shape),
+            "action_dim": self.action_dim,
+            "action_low": self.env.action_space.low.tolist(),
+            "action_high": self.env.action_space.high.tolist(),
+        }
+
+    def train_summary(self) -> dict[str, Any]:
+        """Training outcome (epochs, wall time, best validation loss), JSON-serializable."""
+        if self.train_result is None:
+            return {}
+        return self.train_result.summary()
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Save weights, configuration, goal and versions to one file (atomic, safe to load)."""
+        import gymnasium
+        import stable_baselines3
+
+        path = Path(path)
+        if path.suffix == "":
+            path = path.with_suffix(".pt")
+        extra = {
+            "versions": {
+                "pcc_control": pcc_agent.__version__,
+                "torch": torch.__version__,
+                "gymnasium": gymnasium.__version__,
+                "stable_baselines3": stable_baselines3.__version__,
+            },
+            "num_timesteps": self.num_timesteps,
+            "goal_obs": None if self._goal_obs is None else self._goal_obs.tolist(),
+            "train_summary": self.train_summary(),
+        }
+        save_checkpoint(path, self.model, self.config_dict(), extra)
+
+    @classmethod
+    def load(
+        cls,
+        path: str | os.PathLike[str],
+        env: gym.Env | str | None = None,
+        device: str | torch.device = "auto",
+        **kwargs: Any,
+    ) -> PCCAgent:
+        """Load an agent saved by :meth:`save`.
+
+        Args:
+            path: The file (``.pt`` is appended when missing and the bare path does not exist).
+            env: The environment to control; default: ``gym.make`` of the saved env id.
+            device: Device of the model.
+            **kwargs: Ignored SB3 arguments (``custom_objects``, ...).
+
+        Raises:
+            CheckpointError: Unreadable file, or an env whose spaces differ from the saved ones.
+        """
+        path = Path(path)
+        if not path.exists() and path.with_suffix(".pt").exists():
+            path = path.with_suffix(".pt")
+        checkpoint = load_checkpoint(path)
+        cfg = checkpoint.config
+        try:
+            env = cfg["env_id"] if env is None else env
+            method = cfg["method"]
+            preset = EnvPreset(
+                env_id=cfg["env_id"],
+                model=ModelConfig.from_dict(cfg["model"]),
+                train=TrainConfig.from_dict(cfg["train"]),
+                data=DataConfig(**cfg["data"]),
+                planner=PlannerConfig(
+                    **{k: tuple(v) if isinstance(v, list) else v for k, v in cfg["planner"].items()}
+                ),
+            )
+        except (KeyError, TypeError, ValueError) as error:
+            raise CheckpointError(f"{path} is not a PCCAgent checkpoint: {error}") from error
+        agent = cls(
+            env,
+            method=method,
+            preset=preset,
+            seed=cfg.get("seed"),
+            device=device,
+            env_kwargs=cfg.get("env_kwargs"),
+        )
+        if list(agent.obs_shape) != list(cfg["observation_shape"]) or (
+            agent.action_dim != cfg["action_dim"]
+        ):
+            raise CheckpointError(
+                f"{path} was saved for observations {tuple(cfg['observation_shape'])} and "
+                f"{cfg['action_dim']} actions; this env has {agent.obs_shape} and "
+                f"{agent.action_dim}. Load it with the env it was trained on."
+            )
+        load_weights(agent.model, checkpoint)
+        agent.model.to(agent.device)
+        goal = checkpoint.extra.get("goal_obs")
+        if goal is not None:
+            agent._goal_obs = np.asarray(goal, dtype=np.uint8)
+        agent.num_timesteps = int(checkpoint.extra.get("num_timesteps", 0))
+        return agent
+
+    def __repr__(self) -> str:
+        return (
+            f"PCCAgent(env={self.env_id!r}, method={self.method!r}, seed={self.seed}, "
+            f"device={str(self.device)!r})"
+        )

@@ -1,0 +1,154 @@
+"""One evaluation function for every controller: the paper's percentage of steps in goal.
+
+Every method (a :class:`~pcc_agent.agent.PCCAgent`, any Stable-Baselines3 model, the oracle
+controller) is evaluated by :func:`evaluate_control`, which runs SB3's ``evaluate_policy`` on
+the task's environment and reads the env's ``in_goal`` info key at every step. The numbers
+are therefore comparable by construction.
+
+The metric (paper, Section 6): the percentage of the episode's steps whose TRUE state is in
+the goal region. The denominator is the episode length of the task (``max_episode_steps``):
+if an episode terminates early (e.g. the cart leaves the track) the remaining steps count as
+not in goal.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+__all__ = ["ControlEvaluation", "TaskResult", "evaluate_control", "task_seeds"]
+
+PolicyLike = Any  # anything with SB3's ``predict(obs, state, episode_start, deterministic)``
+
+
+@dataclass
+class TaskResult:
+    """Outcome of one control task (one episode)."""
+
+    seed: int
+    percent_in_goal: float
+    steps: int
+    episode_length: int
+    terminated_early: bool
+    states: list[list[float]] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly representation."""
+        return {
+            "seed": self.seed,
+            "percent_in_goal": self.percent_in_goal,
+            "steps": self.steps,
+            "episode_length": self.episode_length,
+            "terminated_early": self.terminated_early,
+            "states": self.states,
+        }
+
+
+@dataclass
+class ControlEvaluation:
+    """Results of :func:`evaluate_control` over several tasks."""
+
+    env_id: str
+    tasks: list[TaskResult]
+
+    @property
+    def percentages(self) -> np.ndarray:
+        """Per-task percentage of steps in goal (0-100)."""
+        return np.array([t.percent_in_goal for t in self.tasks], dtype=np.float64)
+
+    @property
+    def mean(self) -> float:
+        """Mean percentage over tasks."""
+        return float(self.percentages.mean()) if self.tasks else float("nan")
+
+    @property
+    def standard_error(self) -> float:
+        """Standard error of the mean over tasks."""
+        n = len(self.tasks)
+        return float(self.percentages.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+
+
+class _EpisodeRecorder:
+    """``evaluate_policy`` callback: records ``in_goal`` and the true state at every step."""
+
+    def __init__(self, record_states: bool) -> None:
+        self.record_states = record_states
+        self.in_goal: list[bool] = []
+        self.states: list[list[float]] = []
+        self.terminated = False
+
+    def __call__(self, locals_: dict[str, Any], _globals: dict[str, Any]) -> None:
+        info = locals_["info"]
+        self.in_goal.append(bool(info["in_goal"]))
+        if self.record_states:
+            self.states.append([float(x) for x in info["state"]])
+        if locals_["done"]:
+            self.terminated = not info.get("TimeLimit.truncated", False)
+
+
+def task_seeds(base_seed: int, num_tasks: int) -> list[int]:
+    """Fixed, well-separated seeds for ``num_tasks`` control tasks."""
+    return [int(s) for s in np.random.SeedSequence(base_seed).generate_state(num_tasks)]
+
+
+def evaluate_control(
+    policy: PolicyLike | Callable[[gym.Env], PolicyLike],
+    env_id: str,
+    seeds: Sequence[int],
+    env_kwargs: dict[str, Any] | None = None,
+    record_states: bool = True,
+    deterministic: bool = True,
+) -> ControlEvaluation:
+    """Run one episode per seed and measure the percentage of steps in goal.
+
+    Args:
+        policy: An object with SB3's ``predict`` (a ``PCCAgent``, an SB3 model), or a factory
+            ``env -> policy`` for controllers that need the env itself (the oracle reads the
+            true state from it).
+        env_id: Registered Gymnasium id, e.g. ``"pcc/Planar-v0"``.
+        seeds: One seed per task; the start state is drawn from the env's start distribution
+            with that seed.
+        env_kwargs: Extra keyword arguments for ``gym.make`` (e.g. ``noise_std``).
+        record_states: Keep the true-state trajectory of every task.
+        deterministic: Passed to ``predict``.
+
+    Returns:
+        A :class:`ControlEvaluation` with one :class:`TaskResult` per seed.
+    """
+    results: list[TaskResult] = []
+    for seed in seeds:
+        env = gym.make(env_id, **(env_kwargs or {}))
+        episode_length = int(env.spec.max_episode_steps) if env.spec else 0
+        vec_env = DummyVecEnv([lambda env=env: Monitor(env)])
+        vec_env.seed(int(seed))
+        controller = policy(env) if callable(policy) and not hasattr(policy, "predict") else policy
+        recorder = _EpisodeRecorder(record_states)
+        evaluate_policy(
+            controller,
+            vec_env,
+            n_eval_episodes=1,
+            deterministic=deterministic,
+            callback=recorder,
+            warn=False,
+        )
+        vec_env.close()
+        in_goal, states = recorder.in_goal, recorder.states
+        denominator = max(episode_length, len(in_goal))
+        results.append(
+            TaskResult(
+                seed=int(seed),
+                percent_in_goal=100.0 * sum(in_goal) / denominator,
+                steps=len(in_goal),
+                episode_length=denominator,
+                terminated_early=recorder.terminated and len(in_goal) < denominator,
+                states=states,
+            )
+        )
+    return ControlEvaluation(env_id=env_id, tasks=results)

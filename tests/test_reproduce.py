@@ -1,0 +1,108 @@
+"""The reproduction pipeline: a smoke run in a subprocess, resumability of the per-run files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.reproduce import (
+    RunSpec,
+    aggregate,
+    execute_run,
+    interquartile_mean,
+    load_finished_run,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def tiny_spec(seed: int = 0) -> RunSpec:
+    return RunSpec(
+        env_id="pcc/Planar-v0",
+        method="pcc",
+        seed=seed,
+        noise_std=0.0,
+        num_tasks=1,
+        task_seed=7,
+        model_variant="paper",
+        preset="test",
+        num_samples=256,
+        max_epochs=1,
+    )
+
+
+def test_smoke_quick_preset_in_subprocess(tmp_path):
+    cmd = [
+        sys.executable,
+        "-m",
+        "benchmarks.reproduce",
+        "--preset",
+        "quick",
+        "--num-models",
+        "1",
+        "--num-tasks",
+        "1",
+        "--max-epochs",
+        "1",
+        "--workers",
+        "1",
+        "--no-oracle",
+        "--results-dir",
+        str(tmp_path / "res"),
+        "--data-dir",
+        str(tmp_path / "data"),
+    ]
+    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
+    rows = json.loads((tmp_path / "res" / "summary.json").read_text())
+    assert rows[0]["env"] == "pcc/Planar-v0" and rows[0]["n_models"] == 1
+    assert 0.0 <= rows[0]["mean_all"] <= 100.0
+    assert "% of steps in goal" in out.stdout
+    assert (tmp_path / "res" / "summary.md").exists()
+
+
+def test_finished_run_is_skipped_and_partial_run_redone(tmp_path):
+    spec = tiny_spec()
+    record = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    path = tmp_path / spec.relative_path
+    assert record["status"] == "done" and path.exists()
+    assert len(record["percentages"]) == 1 and len(record["tasks"][0]["states"]) > 0
+    again = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    assert again.get("skipped") is True
+    # A run killed mid-way leaves at most a truncated or unfinished file: it is redone.
+    path.write_text(path.read_text()[:100])
+    assert load_finished_run(path) is None
+    redone = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    assert not redone.get("skipped") and load_finished_run(path) is not None
+    assert redone["percentages"] == record["percentages"]
+
+
+def test_aggregate_all_and_top1():
+    def rec(seed, values):
+        return {
+            "spec": {
+                "env_id": "e",
+                "method": "pcc",
+                "noise_std": 0.0,
+                "preset": "p",
+                "seed": seed,
+                "model_variant": "paper",
+            },
+            "percentages": values,
+            "train_seconds": 1.0,
+        }
+
+    rows = aggregate([rec(0, [0.0, 10.0]), rec(1, [50.0, 70.0])])
+    (row,) = rows
+    assert row["mean_all"] == 32.5 and row["mean_top1"] == 60.0 and row["top1_seed"] == 1
+    assert np.isclose(row["se_all"], np.std([0, 10, 50, 70], ddof=1) / 2)
+    assert row["n_models"] == 2 and row["n_tasks"] == 2
+    assert row["iqm_ci"][0] <= row["iqm"] <= row["iqm_ci"][1]
+
+
+def test_interquartile_mean():
+    assert interquartile_mean(np.array([0, 1, 2, 3, 4, 5, 6, 100])) == 3.5
