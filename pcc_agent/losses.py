@@ -241,6 +241,37 @@ def pcc_amortized_loss(
     return pcc_loss(model, batch, config, generator, amortized=True)
 
 
+def locally_linear_kl(
+    mean: torch.Tensor, v: torch.Tensor, r: torch.Tensor, logvar: torch.Tensor,
+    mean_next: torch.Tensor, logvar_next: torch.Tensor,
+) -> torch.Tensor:
+    """KL(N(mean, A Sigma A^T) || N(mean_next, diag(exp(logvar_next)))) with A = I + v r^T.
+
+    ``Sigma = diag(exp(logvar))``. Uses ``log det(A Sigma A^T) = 2 log|1 + r^T v| + sum logvar``
+    (matrix determinant lemma) and ``tr(S^-1 A Sigma A^T) = sum_ij A_ij^2 Sigma_j / S_i``.
+
+    Args:
+        mean: Mean of the transition distribution, ``(B, n_z)``.
+        v: Rank-one factor ``(B, n_z)``.
+        r: Rank-one factor ``(B, n_z)``.
+        logvar: Log-variance of the encoder distribution that A maps, ``(B, n_z)``.
+        mean_next: Mean of the encoder distribution of x_{t+1}.
+        logvar_next: Its log-variance.
+
+    Returns:
+        KL per sample, ``(B,)``.
+    """
+    n_z = mean.shape[-1]
+    eye = torch.eye(n_z, dtype=v.dtype, device=v.device)
+    a_mat = eye + v.unsqueeze(-1) * r.unsqueeze(-2)
+    inv_var_next = torch.exp(-logvar_next)
+    trace = (a_mat.pow(2) * torch.exp(logvar).unsqueeze(-2) * inv_var_next.unsqueeze(-1)).sum(
+        (-2, -1))
+    maha = ((mean_next - mean).pow(2) * inv_var_next).sum(-1)
+    log_det_a = torch.log((1.0 + (r * v).sum(-1)).abs().clamp_min(1e-8))
+    return 0.5 * (trace + maha - n_z + logvar_next.sum(-1) - logvar.sum(-1) - 2.0 * log_det_a)
+
+
 def e2c_loss(
     model: EmbeddingModel,
     batch: TransitionBatch,
@@ -281,7 +312,6 @@ def e2c_loss(
     assert isinstance(dynamics, E2CTransition)
     v, r, b_mat, o, _ = dynamics.components(z_t)
     bu_o = (b_mat @ u.unsqueeze(-1)).squeeze(-1) + o
-    rv = (r * v).sum(-1, keepdim=True)
     z_hat_next = z_t + v * (r * z_t).sum(-1, keepdim=True) + bu_o
     m = mu_t + v * (r * mu_t).sum(-1, keepdim=True) + bu_o
 
@@ -291,15 +321,7 @@ def e2c_loss(
     prediction = -log_lik[n:].mean()
     kl_prior = gaussian_kl_standard(mu_t, lv_t).mean()
 
-    eye = torch.eye(model.latent_dim, dtype=v.dtype, device=v.device)
-    a_mat = eye + v.unsqueeze(-1) * r.unsqueeze(-2)
-    inv_var_n = torch.exp(-lv_n)
-    trace = (a_mat.pow(2) * torch.exp(lv_t).unsqueeze(-2) * inv_var_n.unsqueeze(-1)).sum((-2, -1))
-    maha = ((mu_n - m).pow(2) * inv_var_n).sum(-1)
-    log_det_a = torch.log((1.0 + rv.squeeze(-1)).abs().clamp_min(1e-8))
-    kl_transition = 0.5 * (
-        trace + maha - model.latent_dim + lv_n.sum(-1) - lv_t.sum(-1) - 2.0 * log_det_a
-    ).mean()
+    kl_transition = locally_linear_kl(m, v, r, lv_t, mu_n, lv_n).mean()
 
     vae = reconstruction + kl_prior
     loss = (reconstruction + prediction + kl_prior + config.e2c_lambda * kl_transition
@@ -431,6 +453,7 @@ __all__ = [
     "curvature_penalty",
     "e2c_loss",
     "get_loss",
+    "locally_linear_kl",
     "model_config_for_method",
     "pcc_amortized_loss",
     "pcc_loss",

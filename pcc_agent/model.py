@@ -25,6 +25,8 @@ class EmbeddingModel(nn.Module):
         obs_shape: Observation shape ``(frames, H, W)``.
         action_dim: Action dimension n_u.
         config: Architecture (:class:`pcc_agent.presets.ModelConfig`).
+        seed: Optional seed of the weight initialization (drawn inside ``fork_rng``, so the
+            global torch RNG state is left untouched); None uses the global RNG.
 
     Example:
         >>> import torch
@@ -36,12 +38,20 @@ class EmbeddingModel(nn.Module):
         ((5, 2, 2), (5, 2, 2))
     """
 
-    def __init__(self, obs_shape: Sequence[int], action_dim: int, config: ModelConfig) -> None:
+    def __init__(
+        self, obs_shape: Sequence[int], action_dim: int, config: ModelConfig,
+        seed: int | None = None,
+    ) -> None:
         super().__init__()
         self.obs_shape = tuple(int(s) for s in obs_shape)
         self.action_dim = int(action_dim)
         self.config = config
-        nets = build_networks(self.obs_shape, self.action_dim, config)
+        if seed is None:
+            nets = build_networks(self.obs_shape, self.action_dim, config)
+        else:
+            with torch.random.fork_rng(devices=[]):
+                torch.manual_seed(seed)
+                nets = build_networks(self.obs_shape, self.action_dim, config)
         self.encoder = nets.encoder
         self.decoder = nets.decoder
         self.dynamics = nets.transition

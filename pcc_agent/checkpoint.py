@@ -1,0 +1,267 @@
+"""Atomic, safe checkpoints of an :class:`~pcc_agent.model.EmbeddingModel`.
+
+A checkpoint is one file written with ``torch.save`` and read with
+``torch.load(weights_only=True)`` (no pickled code is ever executed). It holds:
+
+* ``state_dict``: the model weights;
+* ``architecture_json``: observation shape, action dimension and ``ModelConfig`` (enough to
+  rebuild the model without the caller knowing its preset);
+* ``config_json``: the caller's configuration (training config, method, env id, ...);
+* ``extra_json``: any JSON-serializable metadata (epoch, history, ...);
+* ``state``: optional weights-only-safe training state (optimizer state dict, RNG state).
+
+Writes go to a temporary file in the same directory, are flushed to disk, then moved over the
+destination with ``os.replace``, so a crash never leaves a half-written checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from pcc_agent.model import EmbeddingModel
+from pcc_agent.presets import ModelConfig
+
+FORMAT_NAME = "pcc_agent.checkpoint"
+FORMAT_VERSION = 1
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint is missing, corrupt, truncated or does not fit the requested model."""
+
+
+@dataclass
+class Checkpoint:
+    """Contents of a checkpoint file.
+
+    Attributes:
+        path: Where it was read from.
+        state_dict: Model weights.
+        architecture: ``{"obs_shape", "action_dim", "model_config"}``.
+        config: The caller's configuration dict.
+        extra: JSON metadata.
+        state: Training state (optimizer / RNG), empty when not saved.
+    """
+
+    path: Path
+    state_dict: dict[str, torch.Tensor]
+    architecture: dict[str, Any]
+    config: dict[str, Any]
+    extra: dict[str, Any] = field(default_factory=dict)
+    state: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def model_config(self) -> ModelConfig:
+        """The :class:`ModelConfig` the weights belong to."""
+        return ModelConfig.from_dict(self.architecture["model_config"])
+
+    def build_model(self, device: torch.device | str = "cpu") -> EmbeddingModel:
+        """Rebuild the model and load the weights.
+
+        Raises:
+            CheckpointError: The weights do not fit the stored architecture.
+        """
+        model = EmbeddingModel(
+            tuple(self.architecture["obs_shape"]), int(self.architecture["action_dim"]),
+            self.model_config,
+        )
+        load_weights(model, self)
+        return model.to(device)
+
+
+def atomic_torch_save(obj: Any, path: str | os.PathLike[str]) -> None:
+    """``torch.save`` to a temporary file beside ``path``, fsync, then ``os.replace``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            torch.save(obj, handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_write_text(text: str, path: str | os.PathLike[str]) -> None:
+    """Write a text file atomically (temporary file + ``os.replace``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def save_checkpoint(
+    path: str | os.PathLike[str],
+    model: EmbeddingModel,
+    config_dict: dict[str, Any] | None = None,
+    extra: dict[str, Any] | None = None,
+    state: dict[str, Any] | None = None,
+) -> Path:
+    """Save a model atomically to one file.
+
+    Args:
+        path: Destination file (parent directories are created).
+        model: The model.
+        config_dict: JSON-serializable configuration (training config, method, env id, ...).
+        extra: JSON-serializable metadata.
+        state: Optional training state made only of tensors and plain Python containers /
+            numbers (e.g. ``optimizer.state_dict()``, ``generator.get_state()``).
+
+    Returns:
+        The path written.
+
+    Raises:
+        TypeError: ``config_dict`` or ``extra`` is not JSON-serializable.
+    """
+    payload = {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+        "architecture_json": json.dumps(model.architecture()),
+        "config_json": json.dumps(config_dict or {}),
+        "extra_json": json.dumps(extra or {}),
+        "state": state or {},
+    }
+    atomic_torch_save(payload, path)
+    return Path(path)
+
+
+def load_checkpoint(
+    path: str | os.PathLike[str], map_location: torch.device | str = "cpu"
+) -> Checkpoint:
+    """Read a checkpoint written by :func:`save_checkpoint`.
+
+    Args:
+        path: The file.
+        map_location: Device the tensors are loaded to.
+
+    Returns:
+        The :class:`Checkpoint`.
+
+    Raises:
+        CheckpointError: Missing, corrupt or truncated file, or not a pcc_agent checkpoint.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"Checkpoint {path} does not exist (or is not a file).")
+    try:
+        payload = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as error:  # torch raises many types for damaged archives
+        raise CheckpointError(
+            f"Checkpoint {path} is corrupt or truncated and cannot be read ({error}). "
+            "Re-train or restore it from a backup."
+        ) from error
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT_NAME:
+        raise CheckpointError(
+            f"{path} is not a pcc_agent checkpoint (expected a dict with format={FORMAT_NAME!r})."
+        )
+    if payload.get("version") != FORMAT_VERSION:
+        raise CheckpointError(
+            f"{path} has checkpoint format version {payload.get('version')}, this pcc_agent "
+            f"reads version {FORMAT_VERSION}."
+        )
+    try:
+        return Checkpoint(
+            path=path,
+            state_dict=payload["state_dict"],
+            architecture=json.loads(payload["architecture_json"]),
+            config=json.loads(payload["config_json"]),
+            extra=json.loads(payload["extra_json"]),
+            state=payload.get("state", {}),
+        )
+    except (KeyError, TypeError, json.JSONDecodeError) as error:
+        raise CheckpointError(f"Checkpoint {path} is missing or has damaged fields: {error}.") \
+            from error
+
+
+def load_weights(model: EmbeddingModel, checkpoint: Checkpoint) -> None:
+    """Load a checkpoint's weights into an existing model after checking they fit.
+
+    Raises:
+        CheckpointError: Different observation shape, action dimension, architecture, or
+            tensor shapes.
+    """
+    arch = checkpoint.architecture
+    if list(arch.get("obs_shape", [])) != list(model.obs_shape):
+        raise CheckpointError(
+            f"Checkpoint {checkpoint.path} was trained on observations of shape "
+            f"{tuple(arch.get('obs_shape', []))}, the model expects {model.obs_shape}. Use the "
+            "environment (and frame stacking) the model was trained on."
+        )
+    if int(arch.get("action_dim", -1)) != model.action_dim:
+        raise CheckpointError(
+            f"Checkpoint {checkpoint.path} has action dimension {arch.get('action_dim')}, the "
+            f"model expects {model.action_dim}."
+        )
+    own = model.state_dict()
+    missing = sorted(set(own) - set(checkpoint.state_dict))
+    unexpected = sorted(set(checkpoint.state_dict) - set(own))
+    wrong = sorted(
+        f"{k}: {tuple(checkpoint.state_dict[k].shape)} vs {tuple(v.shape)}"
+        for k, v in own.items()
+        if k in checkpoint.state_dict and checkpoint.state_dict[k].shape != v.shape
+    )
+    if missing or unexpected or wrong:
+        raise CheckpointError(
+            f"Checkpoint {checkpoint.path} does not match the model architecture "
+            f"(missing={missing[:5]}, unexpected={unexpected[:5]}, wrong shapes={wrong[:5]}). "
+            "Build the model from checkpoint.model_config (Checkpoint.build_model())."
+        )
+    model.load_state_dict(checkpoint.state_dict)
+
+
+def load_model(
+    path: str | os.PathLike[str],
+    obs_shape: tuple[int, ...] | None = None,
+    action_dim: int | None = None,
+    device: torch.device | str = "cpu",
+) -> tuple[EmbeddingModel, Checkpoint]:
+    """Rebuild a model from a checkpoint, optionally checking it fits an environment's spaces.
+
+    Args:
+        path: The checkpoint file.
+        obs_shape: Expected observation shape (e.g. ``env.observation_space.shape``).
+        action_dim: Expected action dimension.
+        device: Device of the returned model.
+
+    Returns:
+        ``(model, checkpoint)``.
+
+    Raises:
+        CheckpointError: Unreadable file, or spaces that differ from the checkpoint's.
+    """
+    checkpoint = load_checkpoint(path)
+    arch = checkpoint.architecture
+    if obs_shape is not None and tuple(arch["obs_shape"]) != tuple(obs_shape):
+        raise CheckpointError(
+            f"Checkpoint {path} expects observations of shape {tuple(arch['obs_shape'])}, the "
+            f"environment gives {tuple(obs_shape)}."
+        )
+    if action_dim is not None and int(arch["action_dim"]) != int(action_dim):
+        raise CheckpointError(
+            f"Checkpoint {path} expects {arch['action_dim']} action dimensions, the environment "
+            f"has {action_dim}."
+        )
+    try:
+        model = checkpoint.build_model(device)
+    except (TypeError, ValueError) as error:
+        raise CheckpointError(f"Checkpoint {path} has an invalid model config: {error}.") \
+            from error
+    return model, checkpoint

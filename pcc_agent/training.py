@@ -1,0 +1,491 @@
+"""Training loop of the embedding model: optimizer, validation, early stopping, checkpoints.
+
+Data are numpy arrays (uint8 observations ``(N, F, H, W)``, float32 actions ``(N, n_u)``,
+uint8 next observations); :func:`dataset_arrays` also accepts a ``pcc_envs.data``
+``TransitionDataset`` (anything with ``obs``, ``action`` and ``next_obs`` attributes).
+
+Determinism: the validation split, the shuffling and every sampled noise come from
+``torch.Generator`` objects seeded from ``seed``; nothing touches the global RNGs. On CPU two
+runs with the same seed, initial weights and thread count produce bitwise-identical weights.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from pcc_agent.checkpoint import (
+    CheckpointError,
+    atomic_write_text,
+    load_checkpoint,
+    load_weights,
+    save_checkpoint,
+)
+from pcc_agent.losses import METHODS, TransitionBatch, get_loss
+from pcc_agent.model import EmbeddingModel
+from pcc_agent.presets import TrainConfig
+
+
+@dataclass(frozen=True)
+class TransitionArrays:
+    """Validated transition arrays.
+
+    Attributes:
+        obs: uint8 ``(N, F, H, W)``.
+        action: float32 ``(N, n_u)``.
+        next_obs: uint8 ``(N, F, H, W)``.
+    """
+
+    obs: np.ndarray
+    action: np.ndarray
+    next_obs: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.obs.shape[0])
+
+
+def dataset_arrays(data: Any) -> TransitionArrays:
+    """Convert transitions to :class:`TransitionArrays`.
+
+    Args:
+        data: A ``pcc_envs.data.TransitionDataset`` (or any object with ``obs``, ``action``,
+            ``next_obs`` attributes), a mapping with those keys, or a tuple
+            ``(obs, action, next_obs)``.
+
+    Returns:
+        The validated arrays (observations uint8, actions float32).
+
+    Raises:
+        ValueError: Missing fields, inconsistent lengths or shapes.
+    """
+    if isinstance(data, TransitionArrays):
+        return data
+    if isinstance(data, Mapping):
+        fields = (data.get("obs"), data.get("action"), data.get("next_obs"))
+    elif isinstance(data, tuple | list) and len(data) == 3:
+        fields = tuple(data)
+    else:
+        fields = (getattr(data, "obs", None), getattr(data, "action", None),
+                  getattr(data, "next_obs", None))
+    if any(f is None for f in fields):
+        raise ValueError(
+            "Expected transitions with obs, action and next_obs (a TransitionDataset, a dict or "
+            f"an (obs, action, next_obs) tuple), got {type(data).__name__}."
+        )
+    obs, action, next_obs = (np.asarray(f) for f in fields)
+    if obs.ndim != 4 or obs.shape != next_obs.shape:
+        raise ValueError(
+            f"obs and next_obs must both be (N, frames, H, W), got {obs.shape} and "
+            f"{next_obs.shape}."
+        )
+    if obs.dtype != np.uint8 or next_obs.dtype != np.uint8:
+        raise ValueError(
+            f"Observations must be uint8 in [0, 255], got {obs.dtype} / {next_obs.dtype}."
+        )
+    if action.ndim == 1:
+        action = action[:, None]
+    if action.ndim != 2 or action.shape[0] != obs.shape[0]:
+        raise ValueError(f"action must be (N, n_u) with N={obs.shape[0]}, got {action.shape}.")
+    return TransitionArrays(obs, action.astype(np.float32, copy=False), next_obs)
+
+
+def resolve_device(device: torch.device | str = "auto") -> torch.device:
+    """``"auto"`` -> CUDA when available, else CPU; other values are passed to torch.device."""
+    if isinstance(device, torch.device):
+        return device
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(device)
+
+
+@dataclass
+class TrainResult:
+    """Outcome of :func:`train_embedding`.
+
+    Attributes:
+        history: One dict per epoch: ``epoch``, ``train/<term>`` means, ``val/loss``, ``time``.
+        best_validation_loss: Lowest validation loss (training loss without a validation split).
+        best_epoch: Epoch (1-based) of that loss; its weights are in the model on return.
+        epochs: Epochs run in total (including resumed ones).
+        wall_time: Seconds spent in this call.
+        converged: Early stopping triggered (no improvement for ``patience`` epochs).
+        diverged: Training stopped on a non-finite or exploding loss.
+        message: Human-readable reason of the stop.
+    """
+
+    history: list[dict[str, float]] = field(default_factory=list)
+    best_validation_loss: float = math.inf
+    best_epoch: int = 0
+    epochs: int = 0
+    wall_time: float = 0.0
+    converged: bool = False
+    diverged: bool = False
+    message: str = ""
+
+
+def _make_adam(model: torch.nn.Module, config: TrainConfig) -> torch.optim.Adam:
+    """Adam with coupled L2 weight decay; the fused kernel when this torch build has one."""
+    kwargs = dict(lr=config.lr, betas=config.betas, eps=config.eps,
+                  weight_decay=config.weight_decay)
+    try:
+        return torch.optim.Adam(model.parameters(), fused=True, **kwargs)
+    except (RuntimeError, TypeError):  # fused Adam unsupported for this device / version
+        return torch.optim.Adam(model.parameters(), **kwargs)
+
+
+class TrainingDivergedError(RuntimeError):
+    """Raised internally when the loss becomes non-finite or explodes."""
+
+
+class Trainer:
+    """Fits an :class:`EmbeddingModel` with one of the :data:`pcc_agent.losses.METHODS`.
+
+    Args:
+        model: The model (its ``ModelConfig`` must suit the method, see
+            :func:`pcc_agent.losses.model_config_for_method`).
+        config: Optimization and loss hyper-parameters.
+        method: Registry name, e.g. ``"pcc"``.
+        device: ``"auto"``, ``"cpu"``, ``"cuda"``, or a ``torch.device``.
+        progress_bar: Show a tqdm bar over epochs with the main loss terms.
+        log_dir: Directory of the Stable-Baselines3 logger (stdout, csv, tensorboard when
+            installed); None disables logging.
+        checkpoint_path: File written atomically after every epoch (current weights plus the
+            optimizer and RNG state for resuming; at the end the best weights). A JSON copy of
+            the configuration is written beside it (same name, ``.json`` suffix).
+        run_info: Extra JSON-serializable information stored in the checkpoint config.
+    """
+
+    def __init__(
+        self,
+        model: EmbeddingModel,
+        config: TrainConfig,
+        method: str = "pcc",
+        device: torch.device | str = "auto",
+        progress_bar: bool = True,
+        log_dir: str | Path | None = None,
+        checkpoint_path: str | Path | None = None,
+        run_info: dict[str, Any] | None = None,
+    ) -> None:
+        self.loss_fn = get_loss(method)
+        required = METHODS[method].model_options
+        mismatch = {k: v for k, v in required.items() if getattr(model.config, k) != v}
+        if mismatch:
+            raise ValueError(
+                f"Method {method!r} needs ModelConfig fields {mismatch}; build the model with "
+                f"pcc_agent.losses.model_config_for_method(config, {method!r})."
+            )
+        self.method = method
+        self.config = config
+        self.device = resolve_device(device)
+        self.model = model.to(device=self.device, dtype=torch.float32)
+        self.optimizer = _make_adam(self.model, config)
+        self.progress_bar = progress_bar
+        self.log_dir = None if log_dir is None else Path(log_dir)
+        self.checkpoint_path = None if checkpoint_path is None else Path(checkpoint_path)
+        self.run_info = dict(run_info or {})
+        self.shuffle_generator = torch.Generator().manual_seed(config.seed)
+        self.noise_generator = torch.Generator(device=self.device).manual_seed(config.seed + 1)
+        self._logger: Any = None
+
+    # ------------------------------------------------------------------ helpers
+    def _config_dict(self) -> dict[str, Any]:
+        return {"method": self.method, "train_config": self.config.to_dict(),
+                "model": self.model.architecture(), **self.run_info}
+
+    def _make_logger(self) -> Any:
+        if self.log_dir is None:
+            return None
+        from stable_baselines3.common.logger import configure
+
+        formats = ["stdout", "csv"]
+        try:
+            import tensorboard  # noqa: F401
+
+            formats.append("tensorboard")
+        except ImportError:
+            pass
+        return configure(str(self.log_dir), formats)
+
+    def _split(self, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+        split_generator = torch.Generator().manual_seed(self.config.seed + 2)
+        order = torch.randperm(n, generator=split_generator)
+        n_val = int(round(n * self.config.validation_fraction))
+        if self.config.validation_fraction > 0 and n > 1:
+            n_val = min(max(n_val, 1), n - 1)
+        return order[n_val:], order[:n_val]
+
+    def _batch(self, tensors: tuple[torch.Tensor, ...], idx: torch.Tensor) -> TransitionBatch:
+        obs, action, next_obs = tensors
+        return TransitionBatch(obs[idx], action[idx], next_obs[idx])
+
+    def _check(self, value: float, reference: float) -> None:
+        if not math.isfinite(value):
+            raise TrainingDivergedError(f"loss became {value}")
+        if math.isfinite(reference) and abs(value) > self.config.divergence_factor * max(
+            abs(reference), 1e-8
+        ):
+            raise TrainingDivergedError(
+                f"loss {value:.4g} exceeds {self.config.divergence_factor:g} x the best loss "
+                f"{reference:.4g}"
+            )
+
+    def _validate(self, tensors: tuple[torch.Tensor, ...], idx: torch.Tensor) -> float:
+        """Mean validation loss, with fixed noise so epochs are comparable."""
+        generator = torch.Generator(device=self.device).manual_seed(self.config.seed + 3)
+        total, count = 0.0, 0
+        self.model.eval()
+        with torch.no_grad():
+            for start in range(0, len(idx), self.config.batch_size):
+                chunk = idx[start:start + self.config.batch_size]
+                loss, _ = self.loss_fn(self.model, self._batch(tensors, chunk), self.config,
+                                       generator)
+                total += float(loss) * len(chunk)
+                count += len(chunk)
+        self.model.train()
+        return total / max(count, 1)
+
+    def _save(self, result: TrainResult, state: dict[str, Any], finished: bool) -> None:
+        if self.checkpoint_path is None:
+            return
+        extra = {
+            "epochs": result.epochs, "best_epoch": result.best_epoch,
+            "best_validation_loss": result.best_validation_loss, "history": result.history,
+            "finished": finished, "converged": result.converged, "diverged": result.diverged,
+            "bad_epochs": state["bad_epochs"],
+        }
+        training_state: dict[str, Any] = {}
+        if not finished:
+            training_state = {
+                "optimizer": self.optimizer.state_dict(),
+                "shuffle_rng": self.shuffle_generator.get_state(),
+                "noise_rng": self.noise_generator.get_state().cpu(),
+                "best_state_dict": state["best_state_dict"],
+            }
+        save_checkpoint(self.checkpoint_path, self.model, self._config_dict(),
+                        extra=json.loads(json.dumps(extra, default=float)),
+                        state=training_state)
+        atomic_write_text(json.dumps(self._config_dict(), indent=2),
+                          self.checkpoint_path.with_suffix(".json"))
+
+    def _resume(self, result: TrainResult, state: dict[str, Any]) -> None:
+        assert self.checkpoint_path is not None
+        if not self.checkpoint_path.exists():
+            return
+        checkpoint = load_checkpoint(self.checkpoint_path, map_location=self.device)
+        load_weights(self.model, checkpoint)
+        if checkpoint.config.get("method") != self.method:
+            raise CheckpointError(
+                f"Cannot resume: {self.checkpoint_path} was trained with method "
+                f"{checkpoint.config.get('method')!r}, not {self.method!r}."
+            )
+        extra = checkpoint.extra
+        result.history = list(extra.get("history", []))
+        result.epochs = int(extra.get("epochs", 0))
+        result.best_epoch = int(extra.get("best_epoch", 0))
+        result.best_validation_loss = float(extra.get("best_validation_loss", math.inf))
+        state["bad_epochs"] = int(extra.get("bad_epochs", 0))
+        saved = checkpoint.state
+        if saved:
+            self.optimizer.load_state_dict(saved["optimizer"])
+            self.shuffle_generator.set_state(saved["shuffle_rng"])
+            self.noise_generator.set_state(saved["noise_rng"])
+            state["best_state_dict"] = saved["best_state_dict"]
+        else:  # a finished checkpoint holds the best weights only
+            state["best_state_dict"] = copy.deepcopy(self.model.state_dict())
+
+    # ------------------------------------------------------------------ main loop
+    def fit(self, data: Any, resume: bool = False) -> TrainResult:
+        """Train until ``config.epochs``, early stopping or divergence.
+
+        Args:
+            data: Transitions (see :func:`dataset_arrays`).
+            resume: Continue from ``checkpoint_path`` when it exists.
+
+        Returns:
+            The :class:`TrainResult`; the model holds the best-validation weights.
+        """
+        arrays = dataset_arrays(data)
+        if tuple(arrays.obs.shape[1:]) != self.model.obs_shape:
+            raise ValueError(
+                f"Observations have shape {arrays.obs.shape[1:]}, the model expects "
+                f"{self.model.obs_shape}."
+            )
+        if arrays.action.shape[1] != self.model.action_dim:
+            raise ValueError(
+                f"Actions have dimension {arrays.action.shape[1]}, the model expects "
+                f"{self.model.action_dim}."
+            )
+        if resume and self.checkpoint_path is None:
+            raise ValueError("resume=True needs a checkpoint_path.")
+        start_time = time.perf_counter()
+        tensors = (
+            torch.from_numpy(np.ascontiguousarray(arrays.obs)).to(self.device),
+            torch.from_numpy(np.ascontiguousarray(arrays.action)).to(self.device),
+            torch.from_numpy(np.ascontiguousarray(arrays.next_obs)).to(self.device),
+        )
+        train_idx, val_idx = self._split(len(arrays))
+        result = TrainResult()
+        state: dict[str, Any] = {
+            "bad_epochs": 0, "best_state_dict": copy.deepcopy(self.model.state_dict())
+        }
+        if resume:
+            self._resume(result, state)
+        self._logger = self._make_logger()
+        last_good = copy.deepcopy(self.model.state_dict())
+        best_train = min((h["train/loss"] for h in result.history), default=math.inf)
+        bar = None
+        if self.progress_bar:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=self.config.epochs, initial=result.epochs,
+                       desc=f"{self.method} training", unit="epoch")
+        self.model.train()
+        try:
+            while result.epochs < self.config.epochs:
+                epoch_start = time.perf_counter()
+                sums: dict[str, float] = {}
+                seen = 0
+                order = train_idx[torch.randperm(len(train_idx), generator=self.shuffle_generator)]
+                try:
+                    for start in range(0, len(order), self.config.batch_size):
+                        idx = order[start:start + self.config.batch_size].to(self.device)
+                        loss, metrics = self.loss_fn(self.model, self._batch(tensors, idx),
+                                                     self.config, self.noise_generator)
+                        self._check(metrics["loss"], best_train)
+                        self.optimizer.zero_grad(set_to_none=True)
+                        loss.backward()
+                        if self.config.grad_clip_norm is not None:
+                            torch.nn.utils.clip_grad_norm_(self.model.parameters(),
+                                                           self.config.grad_clip_norm)
+                        self.optimizer.step()
+                        for key, value in metrics.items():
+                            sums[key] = sums.get(key, 0.0) + value * len(idx)
+                        seen += len(idx)
+                    if not all(math.isfinite(float(p.detach().sum()))
+                               for p in self.model.parameters()):
+                        raise TrainingDivergedError("weights became non-finite")
+                except TrainingDivergedError as error:
+                    self.model.load_state_dict(last_good)
+                    result.diverged = True
+                    result.message = (
+                        f"Training diverged in epoch {result.epochs + 1} ({error}); restored the "
+                        "weights of the last good epoch. Try a lower TrainConfig.lr, set "
+                        "grad_clip_norm, or check the data (uint8 images, actions in [-1, 1])."
+                    )
+                    break
+                result.epochs += 1
+                row = {"epoch": float(result.epochs)}
+                row.update({f"train/{k}": v / max(seen, 1) for k, v in sums.items()})
+                best_train = min(best_train, row["train/loss"])
+                val_loss = (self._validate(tensors, val_idx) if len(val_idx)
+                            else row["train/loss"])
+                row["val/loss"] = val_loss
+                row["time/epoch_seconds"] = time.perf_counter() - epoch_start
+                result.history.append(row)
+                last_good = copy.deepcopy(self.model.state_dict())
+                if val_loss < result.best_validation_loss - self.config.min_delta:
+                    result.best_validation_loss = val_loss
+                    result.best_epoch = result.epochs
+                    state["best_state_dict"] = last_good
+                    state["bad_epochs"] = 0
+                else:
+                    state["bad_epochs"] += 1
+                self._log(row)
+                if bar is not None:
+                    bar.update(1)
+                    bar.set_postfix(self._postfix(row), refresh=False)
+                if self.config.patience > 0 and state["bad_epochs"] >= self.config.patience:
+                    result.converged = True
+                    result.message = (
+                        f"Early stopping: no validation improvement for {self.config.patience} "
+                        f"epochs (best {result.best_validation_loss:.4f} at epoch "
+                        f"{result.best_epoch})."
+                    )
+                    break
+                self._save(result, state, finished=False)
+            else:
+                result.message = f"Reached the maximum of {self.config.epochs} epochs."
+        finally:
+            if bar is not None:
+                bar.close()
+            if self._logger is not None:
+                self._logger.close()
+        if result.best_epoch > 0:
+            self.model.load_state_dict(state["best_state_dict"])
+        result.wall_time = time.perf_counter() - start_time
+        self._save(result, state, finished=True)
+        return result
+
+    @staticmethod
+    def _postfix(row: Mapping[str, float]) -> dict[str, str]:
+        keys = ("train/loss", "val/loss", "train/prediction", "train/consistency",
+                "train/curvature")
+        return {k.split("/")[-1] if k != "val/loss" else "val": f"{row[k]:.3g}"
+                for k in keys if k in row}
+
+    def _log(self, row: Mapping[str, float]) -> None:
+        if self._logger is None:
+            return
+        for key, value in row.items():
+            if key != "epoch":
+                self._logger.record(key, value)
+        self._logger.dump(int(row["epoch"]))
+
+
+def train_embedding(
+    model: EmbeddingModel,
+    data: Any,
+    train_config: TrainConfig,
+    method: str = "pcc",
+    device: torch.device | str = "auto",
+    seed: int | None = None,
+    progress_bar: bool = True,
+    log_dir: str | Path | None = None,
+    checkpoint_path: str | Path | None = None,
+    resume: bool = False,
+) -> TrainResult:
+    """Train ``model`` on transitions with a method of :data:`pcc_agent.losses.METHODS`.
+
+    Args:
+        model: The model (see :class:`Trainer` for the method requirements).
+        data: ``(obs, action, next_obs)`` arrays, dict, or a ``TransitionDataset``.
+        train_config: Hyper-parameters.
+        method: ``"pcc"``, ``"e2c"``, ``"rce"``, ``"pcc-no-consistency"``,
+            ``"pcc-no-curvature"`` or ``"pcc-amortized"``.
+        device: ``"auto"`` (CUDA when available), ``"cpu"``, ``"cuda"``.
+        seed: Overrides ``train_config.seed`` when given.
+        progress_bar: Show a tqdm progress bar.
+        log_dir: Stable-Baselines3 logger directory (None: no logging).
+        checkpoint_path: Atomic checkpoint file (None: no checkpoints).
+        resume: Continue from ``checkpoint_path``.
+
+    Returns:
+        :class:`TrainResult`; the model holds the best-validation weights.
+
+    Example:
+        >>> import numpy as np
+        >>> from pcc_agent.model import EmbeddingModel
+        >>> from pcc_agent.presets import TrainConfig, get_preset
+        >>> model = EmbeddingModel((1, 40, 40), 2, get_preset("pcc/Planar-v0").model, seed=0)
+        >>> obs = np.zeros((64, 1, 40, 40), np.uint8)
+        >>> result = train_embedding(model, (obs, np.zeros((64, 2), np.float32), obs),
+        ...                          TrainConfig(epochs=1), progress_bar=False, device="cpu")
+        >>> result.epochs
+        1
+    """
+    if seed is not None:
+        import dataclasses
+
+        train_config = dataclasses.replace(train_config, seed=seed)
+    trainer = Trainer(model, train_config, method, device=device, progress_bar=progress_bar,
+                      log_dir=log_dir, checkpoint_path=checkpoint_path)
+    return trainer.fit(data, resume=resume)

@@ -1,0 +1,123 @@
+"""Shapes of every preset's networks, Jacobians of the latent dynamics, preset lookups."""
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from pcc_agent.model import EmbeddingModel
+from pcc_agent.networks import build_networks, to_float_image
+from pcc_agent.presets import (
+    ACTION_DIMS,
+    OBS_SHAPES,
+    PRESETS,
+    ModelConfig,
+    default_preset_for_spaces,
+    get_preset,
+)
+
+SMALL = ModelConfig(latent_dim=3, encoder_hidden=(32,), decoder_hidden=(32,),
+                    transition_hidden=(16, 16), backward_nz=4, backward_nu=4, backward_nx=16,
+                    backward_joint=16)
+
+
+@pytest.mark.parametrize(
+    ("env_id", "variant"), [(e, v) for e in PRESETS for v in PRESETS[e]]
+)
+def test_preset_networks_have_the_right_shapes(env_id, variant):
+    preset = get_preset(env_id, variant)
+    obs_shape, nu = OBS_SHAPES[env_id], ACTION_DIMS[env_id]
+    nz = preset.model.latent_dim
+    nets = build_networks(obs_shape, nu, preset.model)
+    obs = torch.randint(0, 256, (2, *obs_shape), dtype=torch.uint8)
+    u = torch.zeros(2, nu)
+    with torch.no_grad():
+        mean, logvar = nets.encoder(obs)
+        assert mean.shape == logvar.shape == (2, nz)
+        assert nets.decoder(mean).shape == (2, *obs_shape)
+        out = nets.transition(mean, u)
+        assert out.mean.shape == out.logvar.shape == (2, nz)
+        back_mean, back_logvar = nets.backward(mean, obs, u)
+        assert back_mean.shape == back_logvar.shape == (2, nz)
+
+
+def test_paper_planar_architecture_sizes():
+    model = EmbeddingModel((1, 40, 40), 2, get_preset("pcc/Planar-v0").model)
+    linears = [m for m in model.encoder.modules() if isinstance(m, torch.nn.Linear)]
+    assert [(m.in_features, m.out_features) for m in linears] == [(1600, 300), (300, 300),
+                                                                  (300, 4)]
+    linears = [m for m in model.decoder.modules() if isinstance(m, torch.nn.Linear)]
+    assert [(m.in_features, m.out_features) for m in linears] == [(2, 300), (300, 300),
+                                                                  (300, 1600)]
+    assert [get_preset(e).model.latent_dim for e in PRESETS] == [2, 3, 3, 8, 8, 8, 8]
+
+
+def test_uint8_observations_are_scaled_inside_the_model():
+    obs = torch.full((1, 1, 8, 8), 255, dtype=torch.uint8)
+    assert to_float_image(obs).max().item() == 1.0
+    model = EmbeddingModel((1, 8, 8), 2, SMALL, seed=0)
+    with torch.no_grad():
+        torch.testing.assert_close(model.encode(obs)[0], model.encode(obs.float() / 255)[0])
+
+
+@pytest.mark.parametrize("kind", ["mlp", "e2c_linear"])
+def test_linearize_matches_per_sample_jacobians(kind):
+    config = dataclasses.replace(SMALL, transition_kind=kind)
+    model = EmbeddingModel((1, 8, 8), 2, config, seed=0)
+    g = torch.Generator().manual_seed(0)
+    z, u = torch.randn(4, 3, generator=g), torch.randn(4, 2, generator=g)
+    a_mat, b_mat = model.linearize(z, u, exact=True)
+    assert a_mat.shape == (4, 3, 3) and b_mat.shape == (4, 3, 2)
+    for i in range(4):
+        ja, jb = torch.autograd.functional.jacobian(
+            lambda a, b: model.transition_mean(a, b), (z[i], u[i]))
+        torch.testing.assert_close(a_mat[i], ja)  # row = output, column = input (not A^T)
+        torch.testing.assert_close(b_mat[i], jb)
+    if kind == "e2c_linear":
+        heads_a, heads_b = model.linearize(z, u)
+        v, r, b_net, _, _ = model.dynamics.components(z)
+        torch.testing.assert_close(heads_a, torch.eye(3) + v.unsqueeze(-1) * r.unsqueeze(-2))
+        torch.testing.assert_close(heads_b, b_net)
+
+
+def test_transition_mean_has_skip_connection_and_amortized_heads():
+    config = dataclasses.replace(SMALL, amortized=True)
+    model = EmbeddingModel((1, 8, 8), 2, config, seed=0)
+    for module in (model.dynamics.head,):
+        torch.nn.init.zeros_(module.weight)
+        torch.nn.init.zeros_(module.bias)
+    z, u = torch.randn(5, 3), torch.randn(5, 2)
+    torch.testing.assert_close(model.transition_mean(z, u), z)
+    a_mat, b_mat = model.linearize(z, u)
+    assert a_mat.shape == (5, 3, 3) and b_mat.shape == (5, 3, 2)
+    with pytest.raises(ValueError, match="no A/B heads"):
+        EmbeddingModel((1, 8, 8), 2, SMALL).linearize(z, u, exact=False)
+
+
+def test_get_preset_errors_list_known_ids():
+    with pytest.raises(ValueError, match="pcc/Planar-v0"):
+        get_preset("Planar")
+    with pytest.raises(ValueError, match="fast"):
+        get_preset("pcc/Planar-v0", "huge")
+    assert get_preset("pcc/Planar-v0", "fast") == get_preset("pcc/Planar-v0", "paper")
+
+
+def test_default_preset_for_foreign_spaces():
+    act = gym.spaces.Box(-1, 1, (2,), np.float32)
+    small = default_preset_for_spaces(gym.spaces.Box(0, 255, (2, 32, 32), np.uint8), act)
+    large = default_preset_for_spaces(gym.spaces.Box(0, 255, (3, 96, 72), np.uint8), act)
+    assert small.model.encoder_kind == "mlp" and large.model.encoder_kind == "cnn"
+    model = EmbeddingModel((3, 96, 72), 2, large.model, seed=0)
+    with torch.no_grad():
+        z = model.encode(torch.zeros(1, 3, 96, 72, dtype=torch.uint8))[0]
+        assert model.decode_logits(z).shape == (1, 3, 96, 72)
+    with pytest.raises(ValueError, match="image observation"):
+        default_preset_for_spaces(gym.spaces.Box(-1, 1, (4,), np.float32), act)
+
+
+def test_model_config_round_trip():
+    for env_id in PRESETS:
+        for preset in PRESETS[env_id].values():
+            assert ModelConfig.from_dict(preset.model.to_dict()) == preset.model
