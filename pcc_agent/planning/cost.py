@@ -127,10 +127,10 @@ class QuadraticCost:
             Costs ``(B,)`` in the dtype of ``z``.
         """
         e = z - self._goal_for(z)
-        Q = self.Q.to(e)
-        stage = torch.einsum("btI,IJ,btJ->b", e[:, :-1], Q, e[:, :-1])
-        terminal = torch.einsum("bI,IJ,bJ->b", e[:, -1], self.Q_terminal.to(e), e[:, -1])
-        action = torch.einsum("btI,IJ,btJ->b", u, self.R.to(u), u).to(e.dtype)
+        e_stage, e_final = e[:, :-1], e[:, -1]
+        stage = ((e_stage @ self.Q.to(e)) * e_stage).sum((1, 2))
+        terminal = ((e_final @ self.Q_terminal.to(e)) * e_final).sum(1)
+        action = ((u @ self.R.to(u)) * u).sum((1, 2)).to(e.dtype)
         return stage + terminal + action
 
     def derivatives(self, z: Tensor, u: Tensor) -> CostDerivatives:

@@ -212,6 +212,12 @@ def backward_pass(
 ) -> BackwardPassResult:
     """Control-limited Riccati recursion of iLQR (see the module docstring), in float64.
 
+    Implementation: quadratic models are kept in homogeneous form, ``1/2 [x; 1]^T M [x; 1]``
+    with the Hessian, the gradient in the last column and twice the constant in the corner,
+    so that each step is ``Q = G^T W G + L_t`` (``G = [[A, B, 0], [0, 0, 1]]``) and
+    ``W = P^T Q P`` (``P = [[I, 0], [K, k], [0, 1]]``, the affine policy): a handful of tiny
+    matrix products per step. The corner of ``W_0`` accumulates the predicted change.
+
     Args:
         A: State Jacobians ``(B, T, nz, nz)``.
         B: Action Jacobians ``(B, T, nz, nu)``.
@@ -230,72 +236,68 @@ def backward_pass(
         everywhere. Gains of problems that did not are meaningless (but finite).
     """
     n_b, horizon, nz, nu = B.shape
-    F = np.concatenate([A, B], axis=-1)  # (B, T, nz, nx)
-    F_T = np.ascontiguousarray(np.swapaxes(F, -1, -2))
-    L = np.zeros((nz + nu, nz + nu))
-    L[:nz, :nz] = l_zz
-    L[nz:, nz:] = l_uu
-    l_x = np.concatenate([l_z[:, :-1], l_u], axis=-1)
-    k = np.zeros((n_b, horizon, nu))
-    K = np.zeros((n_b, horizon, nu, nz))
+    nx = nz + nu
+    G = np.zeros((n_b, horizon, nz + 1, nx + 1))
+    G[..., :nz, :nz] = A
+    G[..., :nz, nz:nx] = B
+    G[..., nz, nx] = 1.0
+    G_T = np.ascontiguousarray(np.swapaxes(G, -1, -2))
+    L = np.zeros((n_b, horizon, nx + 1, nx + 1))
+    L[..., :nz, :nz] = l_zz
+    L[..., nz:nx, nz:nx] = l_uu
+    L[..., :nz, nx] = l_z[:, :-1]
+    L[..., nz:nx, nx] = l_u
+    L[..., nx, :nz] = l_z[:, :-1]
+    L[..., nx, nz:nx] = l_u
+    P = np.zeros((n_b, horizon, nx + 1, nz + 1))
+    P[..., :nz, :nz] = np.eye(nz)
+    P[..., nx, nz] = 1.0
+    P_T = np.swapaxes(P, -1, -2)
+    W = np.zeros((n_b, nz + 1, nz + 1))
+    W[:, :nz, :nz] = l_zz_terminal
+    W[:, :nz, nz] = l_z[:, -1]
+    W[:, nz, :nz] = l_z[:, -1]
     ok = np.ones(n_b, dtype=bool)
-    decrease = np.zeros(n_b)
-    V_z = l_z[:, -1].copy()
-    V_zz = np.broadcast_to(l_zz_terminal, (n_b, nz, nz)).copy()
-    mu_eye = mu[:, None, None] * np.eye(nu)
     lower_all = action_low - u
     upper_all = action_high - u
+    eye_u = np.eye(nu)
+    gain_columns = np.r_[:nz, nx]
     for t in range(horizon - 1, -1, -1):
-        VF = V_zz @ F[:, t]
-        Q_xx = F_T[:, t] @ VF + L
-        Q_x = l_x[:, t] + (F_T[:, t] @ V_z[..., None])[..., 0]
-        Q_z, Q_u = Q_x[:, :nz], Q_x[:, nz:]
-        Q_zz, Q_uz, Q_uu = Q_xx[:, :nz, :nz], Q_xx[:, nz:, :nz], Q_xx[:, nz:, nz:]
+        Q = G_T[:, t] @ W @ G[:, t] + L[:, t]
+        Q_uz, Q_uu, Q_u = Q[:, nz:nx, :nz], Q[:, nz:nx, nz:nx], Q[:, nz:nx, nx]
         lower, upper = lower_all[:, t], upper_all[:, t]
         if nu == 1:
-            q_uu = Q_uu[:, 0, 0]
-            h = q_uu + mu
+            h = Q_uu[:, 0, 0] + mu
             good = h > 0
-            ok &= good
-            inv = np.where(good, 1.0 / np.where(good, h, 1.0), 0.0)
-            k_free = -Q_u[:, 0] * inv
-            k_t = np.clip(k_free, lower[:, 0], upper[:, 0])
-            free = (k_free > lower[:, 0]) & (k_free < upper[:, 0])
-            K_t = -Q_uz[:, 0] * (inv * free)[:, None]  # (B, nz)
-            q_u, q_uz = Q_u[:, 0], Q_uz[:, 0]
-            V_z = Q_z + K_t * (q_uu * k_t + q_u)[:, None] + q_uz * k_t[:, None]
-            outer = K_t[:, :, None] * q_uz[:, None, :]
-            V_zz = (Q_zz + q_uu[:, None, None] * K_t[:, :, None] * K_t[:, None, :]
-                    + outer + np.swapaxes(outer, -1, -2))
-            decrease -= k_t * q_u + 0.5 * q_uu * k_t * k_t
-            k[:, t, 0] = k_t
-            K[:, t, 0] = K_t
-            continue
-        H = Q_uu + mu_eye
-        try:
-            np.linalg.cholesky(H)
-        except np.linalg.LinAlgError:
-            good = np.linalg.eigvalsh(H).min(-1) > 0
-            ok &= good
-            H = np.where(good[:, None, None], H, np.eye(nu))
-        gains = -np.linalg.solve(H, np.concatenate([Q_u[..., None], Q_uz], axis=-1))
-        k_t, K_t = gains[..., 0], gains[..., 1:]
-        outside = (k_t < lower) | (k_t > upper)
-        if outside.any():
-            k_t, free = box_qp(H, Q_u, lower, upper, k_t)
-            both_free = free[:, :, None] & free[:, None, :]
-            H_free = np.where(both_free, H, np.eye(nu, dtype=bool))
-            K_t = -np.linalg.solve(H_free, Q_uz * free[:, :, None])
-        K_T = np.swapaxes(K_t, -1, -2)
-        Q_uu_k = (Q_uu @ k_t[..., None])[..., 0]
-        V_z = (Q_z + (K_T @ (Q_uu_k + Q_u)[..., None])[..., 0]
-               + (np.swapaxes(Q_uz, -1, -2) @ k_t[..., None])[..., 0])
-        cross = K_T @ Q_uz
-        V_zz = Q_zz + K_T @ Q_uu @ K_t + cross + np.swapaxes(cross, -1, -2)
-        V_zz = 0.5 * (V_zz + np.swapaxes(V_zz, -1, -2))
-        decrease -= np.einsum("bi,bi->b", k_t, Q_u + 0.5 * Q_uu_k)
-        k[:, t] = k_t
-        K[:, t] = K_t
+            if not good.all():
+                ok &= good
+                h = np.where(good, h, 1.0)
+            k_free = -Q_u[:, 0] / h
+            k_t = np.minimum(np.maximum(k_free, lower[:, 0]), upper[:, 0])
+            P[:, t, nz, nz] = k_t
+            P[:, t, nz, :nz] = Q_uz[:, 0] * ((k_t == k_free) / -h)[:, None]
+        else:
+            H = Q_uu + mu[:, None, None] * eye_u
+            try:
+                np.linalg.cholesky(H)
+            except np.linalg.LinAlgError:
+                good = np.linalg.eigvalsh(H).min(-1) > 0
+                ok &= good
+                H = np.where(good[:, None, None], H, eye_u)
+            gains = -np.linalg.solve(H, Q[:, nz:nx][..., gain_columns])
+            k_t, K_t = gains[..., nz], gains[..., :nz]
+            if ((k_t < lower) | (k_t > upper)).any():
+                k_t, free = box_qp(H, Q_u, lower, upper, k_t)
+                both_free = free[:, :, None] & free[:, None, :]
+                H_free = np.where(both_free, H, eye_u)
+                K_t = -np.linalg.solve(H_free, Q_uz * free[:, :, None])
+            P[:, t, nz:nx, :nz] = K_t
+            P[:, t, nz:nx, nz] = k_t
+        W = P_T[:, t] @ Q @ P[:, t]
+        W = 0.5 * (W + np.swapaxes(W, -1, -2))
+    k = np.ascontiguousarray(P[..., nz:nx, nz])
+    K = np.ascontiguousarray(P[..., nz:nx, :nz])
+    decrease = -0.5 * W[:, nz, nz]
     finite = np.isfinite(k).all((1, 2)) & np.isfinite(K).all((1, 2, 3)) & np.isfinite(decrease)
     ok &= finite
     k[~finite] = 0.0
@@ -336,16 +338,16 @@ def line_search(
     nz = z.shape[-1]
     n_a = alphas.shape[0]
     n = n_b * n_a
-    u_ff = (u.unsqueeze(1) + alphas.view(1, n_a, 1, 1) * k.unsqueeze(1)).reshape(n, horizon, nu)
+    # u_t = u_bar_t + alpha k_t + K_t (z_t - z_bar_t) = c_t + K_t z_t, c_t precomputed.
+    z_bar = torch.nan_to_num(z[:, :-1], nan=0.0, posinf=0.0, neginf=0.0)
+    c = u - (K @ z_bar.unsqueeze(-1)).squeeze(-1)  # (B, T, nu)
+    c = (c.unsqueeze(1) + alphas.view(1, n_a, 1, 1) * k.unsqueeze(1)).reshape(n, horizon, nu, 1)
     K_all = K.unsqueeze(1).expand(n_b, n_a, horizon, nu, nz).reshape(n, horizon, nu, nz)
-    # A diverged nominal (only with zero gains, see ilqr_solve) must not turn 0 * inf into NaN.
-    z_finite = torch.nan_to_num(z, nan=0.0, posinf=0.0, neginf=0.0)
-    z_bar = z_finite.unsqueeze(1).expand(n_b, n_a, horizon + 1, nz).reshape(n, horizon + 1, nz)
-    z_t = z_bar[:, 0]
+    z_t = z[:, 0].repeat_interleave(n_a, 0)
     states, actions = [z_t], []
-    for u_ff_t, K_t, z_bar_t in zip(u_ff.unbind(1), K_all.unbind(1), z_bar.unbind(1)):
-        u_t = torch.baddbmm(u_ff_t.unsqueeze(-1), K_t, (z_t - z_bar_t).unsqueeze(-1))
-        u_t = u_t.squeeze(-1).clamp_(action_low, action_high)
+    for c_t, K_t in zip(c.unbind(1), K_all.unbind(1)):
+        u_t = torch.baddbmm(c_t, K_t, z_t.unsqueeze(-1)).squeeze_(-1)
+        u_t = u_t.clamp_(action_low, action_high)
         z_t = dynamics.step(z_t, u_t)
         states.append(z_t)
         actions.append(u_t)
