@@ -183,7 +183,15 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
     # ------------------------------------------------------------------ public protocol
     def sample_state(self, rng: np.random.Generator) -> np.ndarray:
         """Uniform sample from the state box (the paper's data protocol)."""
-        return rng.uniform(self.state_low, self.state_high)
+        return self.sample_states(rng, 1)[0]
+
+    def sample_states(self, rng: np.random.Generator, num_states: int) -> np.ndarray:
+        """``num_states`` independent draws of :meth:`sample_state`, shape ``(num, state_dim)``.
+
+        Subclasses whose valid states are not a box (Planar's free space) override this one
+        method; :meth:`sample_state` follows.
+        """
+        return rng.uniform(self.state_low, self.state_high, (num_states, self.state_dim))
 
     def sample_action(self, rng: np.random.Generator, size: int | None = None) -> np.ndarray:
         """Uniform normalized action(s) in ``[-1, 1]``."""
@@ -217,12 +225,19 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
         return self.render_states(np.asarray(state, dtype=np.float64)[None])[0]
 
     def observation_of(self, state: np.ndarray) -> np.ndarray:
-        """The observation an agent would see at rest history ending in ``state``."""
-        states = [np.asarray(state, dtype=np.float64)]
-        while len(states) < self.num_frames:
-            states.insert(0, self._previous_state(states[0]))
-        frames = self.render_states(np.stack(states))
-        return stack_frames(list(frames))
+        """The observation an agent would see at ``state`` after a zero-action history.
+
+        Earlier frames show the state integrated backward by one control period per frame
+        under zero action, so the frame pair carries the state's velocity.
+        """
+        return self.observations_of(np.asarray(state, dtype=np.float64)[None])[0]
+
+    def observations_of(self, states: np.ndarray) -> np.ndarray:
+        """Batched :meth:`observation_of`: ``(N, state_dim)`` -> ``uint8 (N, frames, H, W)``."""
+        history = [np.asarray(states, dtype=np.float64)]
+        while len(history) < self.num_frames:
+            history.insert(0, self._previous_state(history[0]))
+        return stack_frames([self.render_states(s) for s in history])
 
     def goal_observation(self) -> np.ndarray:
         """Observation of the goal state: the planner's target."""
@@ -233,8 +248,9 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.reward_type == "sparse":
             return float(in_goal)
         err = self.state_error(state)
-        weights = np.ones_like(err) if self.reward_weights is None else self.reward_weights
-        return -float(np.sum(weights * err**2))
+        if self.reward_weights is None:
+            return -float(np.dot(err, err))
+        return -float(np.dot(self.reward_weights, err * err))
 
     @property
     def state(self) -> np.ndarray:
@@ -257,6 +273,9 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
                     f"Action has shape {arr.shape}, expected ({self.action_dim},) for "
                     f"{type(self).__name__}; for several envs use a VecEnv."
                 )
+        low, high = float(arr.min()), float(arr.max())
+        if -1.0 - 1e-6 <= low and high <= 1.0 + 1e-6:  # fast path; False for NaN
+            return arr
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"Action contains NaN or inf: {arr}")
         if np.any(np.abs(arr) > 1.0 + 1e-6):
