@@ -22,6 +22,9 @@ from pcc_agent.losses import (
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ModelConfig, TrainConfig
 
+# Forward-mode AD loads torch's jit decompositions once; torch itself warns about them.
+pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated")
+
 SMALL = ModelConfig(latent_dim=3, encoder_hidden=(32,), decoder_hidden=(32,),
                     transition_hidden=(16, 16), backward_nz=4, backward_nu=4, backward_nx=16,
                     backward_joint=16)

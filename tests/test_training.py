@@ -1,0 +1,156 @@
+"""Tiny end-to-end training runs, determinism, checkpoints and divergence handling."""
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_model, save_checkpoint
+from pcc_agent.losses import model_config_for_method
+from pcc_agent.model import EmbeddingModel
+from pcc_agent.presets import ModelConfig, TrainConfig
+from pcc_agent.training import dataset_arrays, resolve_device, train_embedding
+
+# Forward-mode AD loads torch's jit decompositions once; torch itself warns about them.
+pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated")
+
+SIZE = 20
+CONFIG = ModelConfig(latent_dim=2, encoder_hidden=(64,), decoder_hidden=(64,),
+                     transition_hidden=(16, 16), backward_nz=5, backward_nu=5, backward_nx=32,
+                     backward_joint=32)
+TRAIN = TrainConfig(epochs=3, batch_size=32, validation_fraction=0.2, patience=0, seed=0,
+                    lr=2e-3)
+
+
+def planar_like(n: int, seed: int = 0):
+    """A bright 3x3 square at a random position, moved by the (scaled) action."""
+    rng = np.random.default_rng(seed)
+    pos = rng.integers(1, SIZE - 2, size=(n, 2))
+    action = rng.uniform(-1, 1, size=(n, 2)).astype(np.float32)
+    nxt = np.clip(pos + np.round(2 * action).astype(int), 1, SIZE - 2)
+
+    def render(p):
+        img = np.zeros((n, 1, SIZE, SIZE), np.uint8)
+        for i, (r, c) in enumerate(p):
+            img[i, 0, r - 1:r + 2, c - 1:c + 2] = 255
+        return img
+
+    return render(pos), action, render(nxt)
+
+
+def _train(data, method="pcc", config=TRAIN, **kwargs):
+    model = EmbeddingModel((1, SIZE, SIZE), 2, model_config_for_method(CONFIG, method), seed=0)
+    result = train_embedding(model, data, config, method=method, device="cpu",
+                             progress_bar=False, **kwargs)
+    return model, result
+
+
+def test_tiny_training_lowers_the_loss():
+    _, result = _train(planar_like(300))
+    losses = [row["val/loss"] for row in result.history]
+    assert result.epochs == 3 and len(losses) == 3
+    assert losses[-1] < 0.8 * losses[0]
+    assert all(math.isfinite(v) for row in result.history for v in row.values())
+    assert result.best_validation_loss == min(losses)
+
+
+def test_two_seeded_runs_are_bitwise_identical():
+    data = planar_like(160)
+    config = dataclasses.replace(TRAIN, epochs=2)
+    first, _ = _train(data, config=config)
+    second, _ = _train(data, config=config)
+    for (name, a), (_, b) in zip(first.state_dict().items(), second.state_dict().items()):
+        assert torch.equal(a, b), name
+    third, _ = _train(data, config=dataclasses.replace(config, seed=1))
+    assert not torch.equal(first.encoder.head.weight, third.encoder.head.weight)
+
+
+@pytest.mark.parametrize("method", ["e2c", "rce"])
+def test_baselines_train(method):
+    _, result = _train(planar_like(128), method=method,
+                       config=dataclasses.replace(TRAIN, epochs=2))
+    assert result.epochs == 2 and not result.diverged
+
+
+def test_checkpoint_round_trip_and_resume(tmp_path):
+    data = planar_like(160)
+    path = tmp_path / "model.pt"
+    config = dataclasses.replace(TRAIN, epochs=2)
+    model, _ = _train(data, config=config, checkpoint_path=path)
+    assert json.loads(path.with_suffix(".json").read_text())["method"] == "pcc"
+    loaded, checkpoint = load_model(path, obs_shape=(1, SIZE, SIZE), action_dim=2)
+    assert checkpoint.extra["finished"] and checkpoint.extra["epochs"] == 2
+    obs = torch.from_numpy(data[0][:8])
+    with torch.no_grad():
+        torch.testing.assert_close(loaded.encode(obs)[0], model.encode(obs)[0], rtol=0, atol=0)
+    _, resumed = _train(data, config=dataclasses.replace(config, epochs=3),
+                        checkpoint_path=path, resume=True)
+    assert resumed.epochs == 3 and len(resumed.history) == 3
+
+
+def test_corrupt_and_mismatched_checkpoints_raise(tmp_path):
+    model = EmbeddingModel((1, SIZE, SIZE), 2, CONFIG, seed=0)
+    path = save_checkpoint(tmp_path / "ok.pt", model, {"method": "pcc"})
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with pytest.raises(CheckpointError, match="corrupt or truncated"):
+        load_checkpoint(truncated)
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(b"not a checkpoint at all")
+    with pytest.raises(CheckpointError):
+        load_checkpoint(garbage)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        load_checkpoint(tmp_path / "missing.pt")
+    with pytest.raises(CheckpointError, match="shape"):
+        load_model(path, obs_shape=(2, SIZE, SIZE))
+    with pytest.raises(CheckpointError, match="action"):
+        load_model(path, action_dim=3)
+    other = EmbeddingModel((1, SIZE, SIZE), 2, dataclasses.replace(CONFIG, latent_dim=3))
+    from pcc_agent.checkpoint import load_weights
+
+    with pytest.raises(CheckpointError, match="does not match"):
+        load_weights(other, load_checkpoint(path))
+
+
+def test_divergence_stops_and_restores_last_good_weights():
+    config = dataclasses.replace(TRAIN, epochs=3, divergence_factor=1e-3)
+    model, result = _train(planar_like(96), config=config)
+    assert result.diverged and result.epochs == 1
+    assert "diverged" in result.message
+    assert all(torch.isfinite(p).all() for p in model.parameters())
+
+
+def test_dataset_arrays_accepts_dataset_like_objects():
+    obs, action, next_obs = planar_like(10)
+
+    class Dataset:
+        pass
+
+    ds = Dataset()
+    ds.obs, ds.action, ds.next_obs = obs, action, next_obs
+    arrays = dataset_arrays(ds)
+    assert len(arrays) == 10 and arrays.action.dtype == np.float32
+    assert len(dataset_arrays({"obs": obs, "action": action, "next_obs": next_obs})) == 10
+    with pytest.raises(ValueError, match="uint8"):
+        dataset_arrays((obs.astype(np.float32), action, next_obs))
+    assert resolve_device("cpu") == torch.device("cpu")
+
+
+def test_plot_latent_map_writes_png(tmp_path):
+    from pcc_agent.plots import observations_for_states, planar_grid, plot_latent_map, state_colors
+
+    states = planar_grid((1, 1), (SIZE - 2, SIZE - 2), num=5)
+
+    def render(state):
+        img = np.zeros((1, SIZE, SIZE), np.uint8)
+        r, c = int(state[0]), int(state[1])
+        img[0, r - 1:r + 2, c - 1:c + 2] = 255
+        return img
+
+    obs = observations_for_states(states, render)
+    model = EmbeddingModel((1, SIZE, SIZE), 2, CONFIG, seed=0)
+    path = plot_latent_map(model, obs, state_colors(states), tmp_path / "map.png", "planar")
+    assert path.stat().st_size > 1000
