@@ -103,14 +103,15 @@ class EmbeddingModel(nn.Module):
         """Jacobians ``A = df/dz`` ``(B, n_z, n_z)`` and ``B = df/du`` ``(B, n_z, n_u)``.
 
         Args:
-            z: Latent states ``(B, n_z)``.
-            u: Actions ``(B, n_u)``.
+            z: Latent states ``(..., n_z)`` (any leading batch shape).
+            u: Actions ``(..., n_u)``.
             exact: True: Jacobians of :meth:`transition_mean` (batched ``vmap(jacrev)``).
                 False: the network's A, B heads (amortized PCC, or E2C/RCE's locally-linear
                 A, B). None (default): the heads when the model has them, else exact.
 
         Returns:
-            ``(A, B)``.
+            ``(A, B)`` shaped ``(..., n_z, n_z)`` and ``(..., n_z, n_u)``; ``A[i, j] =
+            d f_i / d z_j`` (rows index outputs).
         """
         use_heads = (self.config.amortized or self.config.transition_kind == "e2c_linear")
         if exact is None:
@@ -123,7 +124,10 @@ class EmbeddingModel(nn.Module):
                 )
             out = self.dynamics(z, u)
             return out.A, out.B
-        return vmap(jacrev(self.dynamics.mean, argnums=(0, 1)))(z, u)
+        lead = z.shape[:-1]
+        a_mat, b_mat = vmap(jacrev(self.dynamics.mean, argnums=(0, 1)))(
+            z.reshape(-1, z.shape[-1]), u.reshape(-1, u.shape[-1]))
+        return (a_mat.reshape(*lead, *a_mat.shape[1:]), b_mat.reshape(*lead, *b_mat.shape[1:]))
 
     def decode_logits(self, z: torch.Tensor) -> torch.Tensor:
         """Bernoulli logits of D(x | z), shaped ``(B, F, H, W)``."""

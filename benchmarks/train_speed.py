@@ -1,0 +1,160 @@
+"""Embedding-model training speed: seconds per epoch and samples per second.
+
+For each environment preset, variant and method, a model is built from the preset and trained
+for ``--epochs`` timed epochs (after one warm-up epoch) on ``num_samples`` transitions with the
+preset's batch size, without validation, checkpoints or logging. Data are real (from
+``pcc_envs.data.load_or_collect``, when ``--real-data`` is given and pcc_envs is importable) or
+synthetic (sparse random uint8 images of the preset's observation shape: speed does not depend
+on image content).
+
+``--converge`` instead trains PCC on Planar with the paper's settings (validation split, early
+stopping) and reports the epochs and wall time until early stopping.
+
+Results go to ``benchmarks/results/train_speed.json`` (a list of rows: env, method, variant,
+seconds_per_epoch, samples_per_second, device, threads, num_samples, batch_size, ...).
+
+Usage:
+    python -m benchmarks.train_speed                                  # Planar PCC, paper size
+    python -m benchmarks.train_speed --envs all --variants fast --max-samples 2000
+    python -m benchmarks.train_speed --converge --real-data --max-epochs 300
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from pcc_agent.losses import METHODS, model_config_for_method
+from pcc_agent.model import EmbeddingModel
+from pcc_agent.presets import ACTION_DIMS, OBS_SHAPES, PRESETS, get_preset
+from pcc_agent.training import TransitionArrays, resolve_device, train_embedding
+
+DEFAULT_OUTPUT = Path(__file__).parent / "results" / "train_speed.json"
+PLANAR = "pcc/Planar-v0"
+
+
+def synthetic_data(env_id: str, num_samples: int, seed: int) -> TransitionArrays:
+    """Sparse random binary uint8 images and uniform actions in [-1, 1]."""
+    rng = np.random.default_rng(seed)
+    shape = (num_samples, *OBS_SHAPES[env_id])
+    obs = np.where(rng.random(shape) < 0.05, 255, 0).astype(np.uint8)
+    next_obs = np.where(rng.random(shape) < 0.05, 255, 0).astype(np.uint8)
+    action = rng.uniform(-1, 1, (num_samples, ACTION_DIMS[env_id])).astype(np.float32)
+    return TransitionArrays(obs, action, next_obs)
+
+
+def load_data(env_id: str, num_samples: int, seed: int, real: bool) -> tuple[Any, str]:
+    """Real data through pcc_envs when requested and available, else synthetic."""
+    if real:
+        try:
+            from pcc_envs.data import load_or_collect
+        except ImportError as error:
+            print(f"pcc_envs.data unavailable ({error}); using synthetic data")
+        else:
+            return load_or_collect(env_id, num_samples, seed), "real"
+    return synthetic_data(env_id, num_samples, seed), "synthetic"
+
+
+def measure(env_id: str, variant: str, method: str, args: argparse.Namespace) -> dict[str, Any]:
+    """Time ``args.epochs`` epochs after one warm-up epoch."""
+    preset = get_preset(env_id, variant)
+    num_samples = min(preset.data.num_samples, args.max_samples or preset.data.num_samples)
+    data, source = load_data(env_id, num_samples, args.seed, args.real_data)
+    config = model_config_for_method(preset.model, method)
+    model = EmbeddingModel(OBS_SHAPES[env_id], ACTION_DIMS[env_id], config, seed=args.seed)
+    train = dataclasses.replace(preset.train, epochs=args.epochs + 1, validation_fraction=0.0,
+                                patience=0, seed=args.seed)
+    result = train_embedding(model, data, train, method=method, device=args.device,
+                             progress_bar=False)
+    if result.diverged:
+        raise RuntimeError(f"{env_id} {method}: {result.message}")
+    times = [row["time/epoch_seconds"] for row in result.history[1:]]
+    seconds = statistics.median(times)
+    return {
+        "env": env_id, "method": method, "variant": variant,
+        "seconds_per_epoch": round(seconds, 4),
+        "samples_per_second": round(num_samples / seconds, 1),
+        "device": str(resolve_device(args.device)), "threads": torch.get_num_threads(),
+        "num_samples": num_samples, "batch_size": train.batch_size,
+        "timed_epochs": len(times), "data": source,
+        "parameters": sum(p.numel() for p in model.parameters()),
+    }
+
+
+def converge(args: argparse.Namespace) -> dict[str, Any]:
+    """Planar PCC, paper settings, trained until early stopping (or ``--max-epochs``)."""
+    preset = get_preset(PLANAR, "paper")
+    data, source = load_data(PLANAR, preset.data.num_samples, args.seed, args.real_data)
+    model = EmbeddingModel(OBS_SHAPES[PLANAR], ACTION_DIMS[PLANAR], preset.model, seed=args.seed)
+    train = dataclasses.replace(preset.train, epochs=args.max_epochs, seed=args.seed,
+                                patience=args.patience)
+    start = time.perf_counter()
+    result = train_embedding(model, data, train, method="pcc", device=args.device,
+                             progress_bar=not args.no_progress)
+    return {
+        "env": PLANAR, "method": "pcc", "variant": "paper", "mode": "converge",
+        "epochs": result.epochs, "best_epoch": result.best_epoch,
+        "converged": result.converged, "wall_time_seconds": round(time.perf_counter() - start, 1),
+        "best_validation_loss": round(result.best_validation_loss, 3),
+        "seconds_per_epoch": round(result.wall_time / max(result.epochs, 1), 4),
+        "samples_per_second": round(
+            preset.data.num_samples * result.epochs / max(result.wall_time, 1e-9), 1),
+        "device": str(resolve_device(args.device)), "threads": torch.get_num_threads(),
+        "num_samples": preset.data.num_samples, "batch_size": train.batch_size, "data": source,
+        "message": result.message,
+    }
+
+
+def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    """Command-line entry point; returns the rows written."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--envs", nargs="+", default=[PLANAR],
+                        help=f"env ids or 'all' (known: {', '.join(PRESETS)})")
+    parser.add_argument("--variants", nargs="+", default=["paper"], choices=["paper", "fast"])
+    parser.add_argument("--methods", nargs="+", default=["pcc"], choices=sorted(METHODS))
+    parser.add_argument("--epochs", type=int, default=3, help="timed epochs (plus one warm-up)")
+    parser.add_argument("--max-samples", type=int, default=0,
+                        help="cap on the preset's data size (0 = the paper's size)")
+    parser.add_argument("--threads", type=int, default=0, help="torch threads (0 = default)")
+    parser.add_argument("--device", default="cpu", help="cpu, cuda or auto")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--real-data", action="store_true", help="use pcc_envs.data")
+    parser.add_argument("--converge", action="store_true",
+                        help="train Planar PCC to early stopping instead")
+    parser.add_argument("--max-epochs", type=int, default=500)
+    parser.add_argument("--patience", type=int, default=30)
+    parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
+    args = parser.parse_args(argv)
+    if args.threads > 0:
+        torch.set_num_threads(args.threads)
+    envs = list(PRESETS) if args.envs == ["all"] else args.envs
+    rows: list[dict[str, Any]] = []
+    if args.converge:
+        rows.append(converge(args))
+        print(json.dumps(rows[-1]))
+    else:
+        for env_id in envs:
+            for variant in args.variants:
+                for method in args.methods:
+                    rows.append(measure(env_id, variant, method, args))
+                    print(json.dumps(rows[-1]))
+    for row in rows:
+        row.update(torch=torch.__version__, machine=platform.machine())
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(rows, indent=2) + "\n")
+    print(f"wrote {args.output}")
+    return rows
+
+
+if __name__ == "__main__":
+    main()
