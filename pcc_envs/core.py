@@ -44,7 +44,7 @@ def rk4_step(xdot: Any, state: np.ndarray, action: np.ndarray, dt: float) -> np.
     return state + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
-def stack_frames(frames: Sequence[np.ndarray]) -> np.ndarray:
+def stack_frames(frames: Sequence[np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
     """Stack frames, oldest first, into observations.
 
     This is the suite's single frame-stacking rule: the environment and the dataset sampler
@@ -53,10 +53,14 @@ def stack_frames(frames: Sequence[np.ndarray]) -> np.ndarray:
     Args:
         frames: ``num_frames`` arrays of shape ``(H, W)`` (one observation) or ``(N, H, W)``
             (a batch), ordered from oldest to newest.
+        out: Optional ``uint8`` destination of the result's shape (the dataset sampler
+            writes straight into its preallocated arrays).
 
     Returns:
         ``uint8`` array of shape ``(num_frames, H, W)`` or ``(N, num_frames, H, W)``.
     """
+    if out is not None:
+        return np.stack(frames, axis=-3, out=out, casting="unsafe")
     return np.stack(frames, axis=-3).astype(np.uint8, copy=False)
 
 
