@@ -1,0 +1,142 @@
+"""The paper's uniform sampler and the dataset cache (:mod:`pcc_envs.data`)."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import pcc_envs
+from pcc_envs.data import (
+    TransitionDataset,
+    cache_path,
+    collect_transitions,
+    load_or_collect,
+    observations_for_states,
+)
+
+ORACLE = [e for e in pcc_envs.ENV_IDS if e != "pcc/LaneKeeping-v0"]
+
+
+@pytest.mark.parametrize("env_id", ORACLE)
+def test_transitions_follow_the_protocol(env_id):
+    data = collect_transitions(env_id, 40, seed=0)
+    env = gym.make(env_id).unwrapped
+    assert data.obs.shape == (40, *env.observation_space.shape) and data.obs.dtype == np.uint8
+    assert data.next_obs.shape == data.obs.shape
+    assert data.action.dtype == np.float32 and np.all(np.abs(data.action) <= 1)
+    # The newest frames show the stored states; the frame pairs overlap by one frame.
+    np.testing.assert_array_equal(data.obs[:, -1], env.render_states(data.state))
+    np.testing.assert_array_equal(data.next_obs[:, -1], env.render_states(data.next_state))
+    if env.num_frames == 2:
+        np.testing.assert_array_equal(data.obs[:, 1], data.next_obs[:, 0])
+    # Without noise the next state is the true transition of the stored (float32) action.
+    np.testing.assert_allclose(data.next_state, env.transition(data.state, data.action), atol=1e-12)
+    assert data.metadata["env_id"] == env_id and data.metadata["num_samples"] == 40
+
+
+def test_sampler_is_reproducible_from_the_seed():
+    a = collect_transitions("pcc/CartPole-v0", 50, seed=7, noise_std=0.01)
+    b = collect_transitions("pcc/CartPole-v0", 50, seed=7, noise_std=0.01)
+    c = collect_transitions("pcc/CartPole-v0", 50, seed=8, noise_std=0.01)
+    for name in ("obs", "action", "next_obs", "state", "next_state"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(a.state, c.state)
+
+
+def test_noise_reaches_the_next_state():
+    clean = collect_transitions("pcc/PendulumSwingUp-v0", 30, seed=1)
+    noisy = collect_transitions("pcc/PendulumSwingUp-v0", 30, seed=1, noise_std=0.1)
+    assert not np.allclose(clean.next_state, noisy.next_state)
+
+
+def test_planar_samples_are_free_and_spread():
+    from pcc_envs.physics import PlanarParams, planar_in_collision
+
+    data = collect_transitions("pcc/Planar-v0", 3000, seed=2)
+    assert not planar_in_collision(data.state, PlanarParams()).any()
+    assert not planar_in_collision(data.next_state, PlanarParams()).any()
+    assert data.state.min() < 3 and data.state.max() > 37
+
+
+def test_env_kwargs_reach_the_env():
+    weak = collect_transitions("pcc/PendulumSwingUp-v0", 20, 0, env_kwargs={"max_torque": 0.1})
+    strong = collect_transitions("pcc/PendulumSwingUp-v0", 20, 0)
+    assert not np.allclose(weak.next_state, strong.next_state)
+    assert weak.metadata["env_kwargs"] == {"max_torque": 0.1}
+
+
+def test_cache_roundtrip_and_keys(tmp_path):
+    first = load_or_collect("pcc/Planar-v0", 64, seed=0, cache_dir=tmp_path)
+    files = sorted(tmp_path.iterdir())
+    assert len(files) == 1 and files[0].name.startswith("pcc-Planar-v0_n64_s0_")
+    again = load_or_collect("pcc/Planar-v0", 64, seed=0, cache_dir=tmp_path)
+    np.testing.assert_array_equal(first.obs, again.obs)
+    assert first.metadata == again.metadata
+    # Noise 0 and 0.1 (and any other key) never share a file.
+    paths = {
+        cache_path("pcc/Planar-v0", 64, 0, 0.0, cache_dir=tmp_path),
+        cache_path("pcc/Planar-v0", 64, 0, 0.1, cache_dir=tmp_path),
+        cache_path("pcc/Planar-v0", 64, 0, 1e-17, cache_dir=tmp_path),
+        cache_path("pcc/Planar-v0", 64, 1, 0.0, cache_dir=tmp_path),
+        cache_path("pcc/Planar-v0", 65, 0, 0.0, cache_dir=tmp_path),
+        cache_path("pcc/Planar-v0", 64, 0, 0.0, {"reward_type": "sparse"}, cache_dir=tmp_path),
+    }
+    assert len(paths) == 6
+    load_or_collect("pcc/Planar-v0", 64, seed=0, noise_std=0.1, cache_dir=tmp_path)
+    assert len(list(tmp_path.iterdir())) == 2
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_cache_dir_from_environment(tmp_path, monkeypatch):
+    monkeypatch.setenv("PCC_DATA_DIR", str(tmp_path))
+    assert cache_path("pcc/Planar-v0", 1, 0).parent == tmp_path
+
+
+def test_cache_regenerates_a_mismatched_file(tmp_path):
+    path = cache_path("pcc/Planar-v0", 16, 0, cache_dir=tmp_path)
+    wrong = collect_transitions("pcc/Planar-v0", 16, seed=5)
+    wrong.save(path)
+    with pytest.warns(UserWarning, match="regenerating"):
+        data = load_or_collect("pcc/Planar-v0", 16, seed=0, cache_dir=tmp_path)
+    np.testing.assert_array_equal(data.state, collect_transitions("pcc/Planar-v0", 16, 0).state)
+    assert TransitionDataset.load(path).metadata["seed"] == 0
+
+
+def test_failed_save_leaves_no_file(tmp_path, monkeypatch):
+    data = collect_transitions("pcc/Planar-v0", 8, seed=0)
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(np, "savez", boom)
+    with pytest.raises(RuntimeError):
+        data.save(tmp_path / "x.npz")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_saved_file_loads_without_pickle(tmp_path):
+    data = collect_transitions("pcc/TwoLink-v0", 8, seed=0)
+    path = data.save(tmp_path / "d.npz")
+    with np.load(path, allow_pickle=False) as raw:
+        assert json.loads(str(raw["metadata"]))["env_id"] == "pcc/TwoLink-v0"
+    loaded = TransitionDataset.load(path)
+    np.testing.assert_array_equal(loaded.next_obs, data.next_obs)
+
+
+def test_split_is_disjoint_and_complete():
+    data = collect_transitions("pcc/Planar-v0", 50, seed=0)
+    train, test = data.split(0.8, np.random.default_rng(0))
+    assert len(train) == 40 and len(test) == 10
+    both = np.concatenate([train.state, test.state])
+    assert len(np.unique(both, axis=0)) == 50
+
+
+def test_observations_for_states_matches_the_env():
+    env = gym.make("pcc/ThreeLink-v0")
+    states = env.unwrapped.sample_states(np.random.default_rng(0), 5)
+    batch = observations_for_states(env, states)
+    for s, obs in zip(states, batch):
+        np.testing.assert_array_equal(obs, env.unwrapped.observation_of(s))
