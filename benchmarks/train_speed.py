@@ -4,8 +4,8 @@ For each environment preset, variant and method, a model is built from the prese
 for ``--epochs`` timed epochs (after one warm-up epoch) on ``num_samples`` transitions with the
 preset's batch size, without validation, checkpoints or logging. Data are real (from
 ``pcc_envs.data.load_or_collect``, when ``--real-data`` is given and pcc_envs is importable) or
-synthetic (sparse random uint8 images of the preset's observation shape: speed does not depend
-on image content).
+synthetic (a square moved by the action, rendered at the preset's observation shape: speed
+does not depend on image content).
 
 ``--converge`` instead trains PCC on Planar with the paper's settings (validation split, early
 stopping) and reports the epochs and wall time until early stopping.
@@ -43,12 +43,34 @@ PLANAR = "pcc/Planar-v0"
 
 
 def synthetic_data(env_id: str, num_samples: int, seed: int) -> TransitionArrays:
-    """Sparse random binary uint8 images and uniform actions in [-1, 1]."""
+    """Planar-like transitions: a bright square moved by the action (2-D, extra dims ignored).
+
+    Every frame of an observation shows the square at successive positions (oldest first), so
+    multi-frame presets see a velocity too. Good enough for timing and for a convergence run
+    when the real environments are not importable.
+    """
     rng = np.random.default_rng(seed)
-    shape = (num_samples, *OBS_SHAPES[env_id])
-    obs = np.where(rng.random(shape) < 0.05, 255, 0).astype(np.uint8)
-    next_obs = np.where(rng.random(shape) < 0.05, 255, 0).astype(np.uint8)
+    frames, height, width = OBS_SHAPES[env_id]
+    half = max(1, height // 20)
     action = rng.uniform(-1, 1, (num_samples, ACTION_DIMS[env_id])).astype(np.float32)
+    step = np.zeros((num_samples, 2))
+    step[:, : min(2, action.shape[1])] = 2 * half * action[:, :2]
+    low, high = half, np.array([height, width]) - half - 1
+    pos = rng.uniform(low, high, (num_samples, 2))
+    # positions of the frames of x_t (oldest first) and then of the next frame
+    track = [np.clip(pos - step * (frames - 1 - k), low, high) for k in range(frames + 1)]
+    rows = np.arange(height)[None, :, None]
+    cols = np.arange(width)[None, None, :]
+
+    def render(centers: np.ndarray) -> np.ndarray:
+        r, c = np.round(centers).astype(int).T
+        inside = (np.abs(rows - r[:, None, None]) <= half) & (np.abs(cols - c[:, None, None])
+                                                               <= half)
+        return (255 * inside).astype(np.uint8)
+
+    images = [render(t) for t in track]
+    obs = np.stack(images[:frames], axis=1)
+    next_obs = np.stack(images[1:], axis=1)
     return TransitionArrays(obs, action, next_obs)
 
 

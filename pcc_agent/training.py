@@ -155,13 +155,17 @@ class Trainer:
         config: Optimization and loss hyper-parameters.
         method: Registry name, e.g. ``"pcc"``.
         device: ``"auto"``, ``"cpu"``, ``"cuda"``, or a ``torch.device``.
-        progress_bar: Show a tqdm bar over epochs with the main loss terms.
+        progress_bar: Show a tqdm bar over epochs (advanced every batch) with the main loss
+            terms of the last epoch.
         log_dir: Directory of the Stable-Baselines3 logger (stdout, csv, tensorboard when
             installed); None disables logging.
-        checkpoint_path: File written atomically after every epoch (current weights plus the
+        checkpoint_path: File written atomically every ``checkpoint_every`` epochs (current
+            weights plus the
             optimizer and RNG state for resuming; at the end the best weights). A JSON copy of
             the configuration is written beside it (same name, ``.json`` suffix).
         run_info: Extra JSON-serializable information stored in the checkpoint config.
+        checkpoint_every: Epochs between resumable checkpoints (the final one is always
+            written).
     """
 
     def __init__(
@@ -174,6 +178,7 @@ class Trainer:
         log_dir: str | Path | None = None,
         checkpoint_path: str | Path | None = None,
         run_info: dict[str, Any] | None = None,
+        checkpoint_every: int = 1,
     ) -> None:
         self.loss_fn = get_loss(method)
         required = METHODS[method].model_options
@@ -192,6 +197,7 @@ class Trainer:
         self.log_dir = None if log_dir is None else Path(log_dir)
         self.checkpoint_path = None if checkpoint_path is None else Path(checkpoint_path)
         self.run_info = dict(run_info or {})
+        self.checkpoint_every = max(1, int(checkpoint_every))
         self.shuffle_generator = torch.Generator().manual_seed(config.seed)
         self.noise_generator = torch.Generator(device=self.device).manual_seed(config.seed + 1)
         self._logger: Any = None
@@ -347,7 +353,9 @@ class Trainer:
             from tqdm.auto import tqdm
 
             bar = tqdm(total=self.config.epochs, initial=result.epochs,
-                       desc=f"{self.method} training", unit="epoch")
+                       desc=f"{self.method} training", unit="epoch",
+                       bar_format="{l_bar}{bar}| {n:.2f}/{total_fmt} [{elapsed}<{remaining}"
+                                  "{postfix}]")
         self.model.train()
         try:
             while result.epochs < self.config.epochs:
@@ -370,6 +378,8 @@ class Trainer:
                         for key, value in metrics.items():
                             sums[key] = sums.get(key, 0.0) + value * len(idx)
                         seen += len(idx)
+                        if bar is not None:
+                            bar.update(len(idx) / len(order))
                     if not all(math.isfinite(float(p.detach().sum()))
                                for p in self.model.parameters()):
                         raise TrainingDivergedError("weights became non-finite")
@@ -401,8 +411,8 @@ class Trainer:
                     state["bad_epochs"] += 1
                 self._log(row)
                 if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix(self._postfix(row), refresh=False)
+                    bar.n = result.epochs  # remove float drift of the fractional updates
+                    bar.set_postfix(self._postfix(row))
                 if self.config.patience > 0 and state["bad_epochs"] >= self.config.patience:
                     result.converged = True
                     result.message = (
@@ -411,7 +421,8 @@ class Trainer:
                         f"{result.best_epoch})."
                     )
                     break
-                self._save(result, state, finished=False)
+                if result.epochs % self.checkpoint_every == 0:
+                    self._save(result, state, finished=False)
             else:
                 result.message = f"Reached the maximum of {self.config.epochs} epochs."
         finally:
