@@ -3,7 +3,8 @@
 The functions are generic: they take arrays of observations and of the true states they were
 rendered from. Building those arrays needs the environment (e.g. ``env.unwrapped.render_state``
 and the env's two-frame observation builder); :func:`observations_for_states` wires such
-callables without this module importing ``pcc_envs``.
+callables without this module importing ``pcc_envs``, and :func:`plot_env_latent_map` uses the
+env protocol (``sample_states``, ``observations_of``) directly.
 
 Matplotlib is used with the non-interactive Agg backend.
 """
@@ -13,6 +14,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -125,3 +127,48 @@ def plot_latent_map(
     fig.savefig(out, dpi=100, bbox_inches="tight")
     plt.close(fig)
     return out
+
+
+def plot_env_latent_map(
+    agent: Any,
+    path: str | os.PathLike[str],
+    title: str = "",
+    env: Any = None,
+    num_states: int = 800,
+    seed: int = 0,
+) -> Path:
+    """Latent map of an agent's model for its environment (paper Figure 2).
+
+    States are drawn with the environment's own uniform sampler (``env.unwrapped.
+    sample_states``, so Planar's obstacles are avoided), rendered with
+    ``env.unwrapped.observations_of`` (the env's frame-stacking rule), encoded, and colored by
+    their first two coordinates (Planar: x, y; Pendulum: angle, angular velocity).
+
+    Args:
+        agent: An object with ``model`` (an :class:`EmbeddingModel`) and ``env`` attributes
+            (e.g. ``PCCAgent``), or an :class:`EmbeddingModel` together with ``env``.
+        path: Output PNG path.
+        title: Figure title.
+        env: The environment (defaults to ``agent.env``).
+        num_states: Number of states drawn.
+        seed: Seed of the state sampler.
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: The environment does not expose ``sample_states`` / ``observations_of``.
+    """
+    model = agent if isinstance(agent, EmbeddingModel) else agent.model
+    env = env if env is not None else getattr(agent, "env", None)
+    core = getattr(env, "unwrapped", env)
+    if not (hasattr(core, "sample_states") and hasattr(core, "observations_of")):
+        raise ValueError(
+            "plot_env_latent_map needs a pcc_envs environment (env.unwrapped.sample_states and "
+            "observations_of); for other envs build observations yourself and call "
+            "plot_latent_map."
+        )
+    states = np.asarray(core.sample_states(np.random.default_rng(seed), num_states))
+    observations = np.asarray(core.observations_of(states), dtype=np.uint8)
+    columns = (0, 1) if states.shape[1] > 1 else (0,)
+    return plot_latent_map(model, observations, state_colors(states, columns), path, title)

@@ -154,3 +154,26 @@ def test_plot_latent_map_writes_png(tmp_path):
     model = EmbeddingModel((1, SIZE, SIZE), 2, CONFIG, seed=0)
     path = plot_latent_map(model, obs, state_colors(states), tmp_path / "map.png", "planar")
     assert path.stat().st_size > 1000
+
+
+def test_plot_env_latent_map_uses_the_env_protocol(tmp_path):
+    from pcc_agent.plots import plot_env_latent_map
+
+    class Core:
+        def sample_states(self, rng, num):
+            return rng.uniform(1, SIZE - 2, (num, 2))
+
+        def observations_of(self, states):
+            return np.stack([planar_like(1, seed=int(s[0] * 100))[0][0] for s in states])
+
+    class Env:
+        unwrapped = Core()
+
+    class Agent:
+        model = EmbeddingModel((1, SIZE, SIZE), 2, CONFIG, seed=0)
+        env = Env()
+
+    path = plot_env_latent_map(Agent(), tmp_path / "env_map.png", num_states=20)
+    assert path.exists()
+    with pytest.raises(ValueError, match="pcc_envs environment"):
+        plot_env_latent_map(Agent.model, tmp_path / "x.png", env=object())
