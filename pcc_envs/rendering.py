@@ -18,6 +18,7 @@ lines at 1/16-pixel precision, and the planar agent is a cached antialiased disk
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -211,15 +212,17 @@ def render_cartpole(
         if lo < hi:
             frames[0, top : top + height, lo:hi] = sprite[:, lo - left : hi - left]
         return frames
-    sprites = table[_angle_bin(states[:, 0], view.angle_bins), phase]
-    # Paste each sprite at its whole-pixel column into a canvas padded by one sprite width.
-    canvas = np.zeros((len(states), height, view.size + 2 * width), dtype=np.uint8)
-    left = np.clip(whole - reach + width, 0, view.size + width)
-    for offset in np.unique(left):
-        idx = np.flatnonzero(left == offset)
-        canvas[idx, :, offset : offset + width] = sprites[idx]
+    bins = _angle_bin(states[:, 0], view.angle_bins)
+    left = whole - reach
     frames = np.zeros((len(states), view.size, view.size), dtype=np.uint8)
-    frames[:, top : top + height] = canvas[:, :, width : width + view.size]
+    band = frames[:, top : top + height]
+    # Paste the sprites group by group of equal whole-pixel column, clipped to the frame.
+    for offset in np.unique(left).tolist():
+        lo, hi = max(offset, 0), min(offset + width, view.size)
+        if lo >= hi:
+            continue
+        idx = np.flatnonzero(left == offset)
+        band[idx, :, lo:hi] = table[bins[idx], phase[idx], :, lo - offset : hi - offset]
     return frames
 
 
@@ -247,9 +250,22 @@ def render_arm(states: np.ndarray, params: ArmParams, view: ArmView = ArmView())
     """Arm frames: every link as a rod, from the base at the frame centre."""
     states = np.asarray(states)
     scale = view.reach / (params.num_links * params.link_length)
-    joints = arm_joint_positions(states[:, : params.num_links], params)
     # OpenCV puts integer coordinates at pixel centres; ours are at half-integers.
     centre = view.size / 2.0 - 0.5
+    if len(states) == 1:  # the env's step: the same points in plain Python floats
+        unit = (1 << _SHIFT) * scale * params.link_length
+        x = y = centre * (1 << _SHIFT)
+        phi = 0.0
+        pts = [(round(x), round(y))]
+        for angle in states[0, : params.num_links].tolist():
+            phi += angle
+            x, y = x + unit * math.sin(phi), y - unit * math.cos(phi)
+            pts.append((round(x), round(y)))
+        frame = np.zeros((1, view.size, view.size), dtype=np.uint8)
+        polyline = np.array(pts, dtype=np.int32)
+        cv2.polylines(frame[0], [polyline], False, 255, view.rod_width, cv2.LINE_AA, _SHIFT)
+        return frame
+    joints = arm_joint_positions(states[:, : params.num_links], params)
     points = np.empty((len(states), params.num_links + 1, 2))
     points[:, 0] = centre
     points[:, 1:, 0] = centre + scale * joints[..., 0]
