@@ -15,7 +15,7 @@ import copy
 import json
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -131,6 +131,26 @@ class TrainResult:
     diverged: bool = False
     message: str = ""
 
+    def summary(self) -> dict[str, Any]:
+        """JSON-serializable outcome without the per-epoch history (last epoch's terms kept).
+
+        Returns:
+            ``epochs, best_epoch, best_validation_loss, wall_time, seconds_per_epoch,
+            converged, diverged, message, final`` (the last history row).
+        """
+        return {
+            "epochs": self.epochs,
+            "best_epoch": self.best_epoch,
+            "best_validation_loss": (self.best_validation_loss
+                                     if math.isfinite(self.best_validation_loss) else None),
+            "wall_time": self.wall_time,
+            "seconds_per_epoch": self.wall_time / self.epochs if self.epochs else None,
+            "converged": self.converged,
+            "diverged": self.diverged,
+            "message": self.message,
+            "final": dict(self.history[-1]) if self.history else {},
+        }
+
 
 def _make_adam(model: torch.nn.Module, config: TrainConfig) -> torch.optim.Adam:
     """Adam with coupled L2 weight decay; the fused kernel when this torch build has one."""
@@ -140,6 +160,9 @@ def _make_adam(model: torch.nn.Module, config: TrainConfig) -> torch.optim.Adam:
         return torch.optim.Adam(model.parameters(), fused=True, **kwargs)
     except (RuntimeError, TypeError):  # fused Adam unsupported for this device / version
         return torch.optim.Adam(model.parameters(), **kwargs)
+
+
+EpochCallback = Callable[[int, dict[str, float]], bool | None]
 
 
 class TrainingDivergedError(RuntimeError):
@@ -166,6 +189,9 @@ class Trainer:
         run_info: Extra JSON-serializable information stored in the checkpoint config.
         checkpoint_every: Epochs between resumable checkpoints (the final one is always
             written).
+        epoch_callback: Called after every epoch as ``epoch_callback(epoch, metrics)`` with
+            the epoch's mean training terms (``loss``, ``prediction``, ...) plus ``val_loss``
+            and ``epoch_seconds``; returning ``False`` stops training.
     """
 
     def __init__(
@@ -179,6 +205,7 @@ class Trainer:
         checkpoint_path: str | Path | None = None,
         run_info: dict[str, Any] | None = None,
         checkpoint_every: int = 1,
+        epoch_callback: EpochCallback | None = None,
     ) -> None:
         self.loss_fn = get_loss(method)
         required = METHODS[method].model_options
@@ -198,6 +225,7 @@ class Trainer:
         self.checkpoint_path = None if checkpoint_path is None else Path(checkpoint_path)
         self.run_info = dict(run_info or {})
         self.checkpoint_every = max(1, int(checkpoint_every))
+        self.epoch_callback = epoch_callback
         self.shuffle_generator = torch.Generator().manual_seed(config.seed)
         self.noise_generator = torch.Generator(device=self.device).manual_seed(config.seed + 1)
         self._logger: Any = None
@@ -413,6 +441,15 @@ class Trainer:
                 if bar is not None:
                     bar.n = result.epochs  # remove float drift of the fractional updates
                     bar.set_postfix(self._postfix(row))
+                if self.epoch_callback is not None:
+                    metrics = {k.split("/", 1)[1]: v for k, v in row.items()
+                               if k.startswith("train/")}
+                    metrics.update(val_loss=val_loss,
+                                   epoch_seconds=row["time/epoch_seconds"])
+                    if self.epoch_callback(result.epochs, metrics) is False:
+                        result.message = (
+                            f"Stopped by the epoch callback after epoch {result.epochs}.")
+                        break
                 if self.config.patience > 0 and state["bad_epochs"] >= self.config.patience:
                     result.converged = True
                     result.message = (
@@ -463,6 +500,8 @@ def train_embedding(
     log_dir: str | Path | None = None,
     checkpoint_path: str | Path | None = None,
     resume: bool = False,
+    epoch_callback: EpochCallback | None = None,
+    checkpoint_every: int = 1,
 ) -> TrainResult:
     """Train ``model`` on transitions with a method of :data:`pcc_agent.losses.METHODS`.
 
@@ -478,6 +517,9 @@ def train_embedding(
         log_dir: Stable-Baselines3 logger directory (None: no logging).
         checkpoint_path: Atomic checkpoint file (None: no checkpoints).
         resume: Continue from ``checkpoint_path``.
+        epoch_callback: ``epoch_callback(epoch, metrics) -> bool | None`` after every epoch;
+            ``False`` stops training (see :class:`Trainer`).
+        checkpoint_every: Epochs between resumable checkpoints.
 
     Returns:
         :class:`TrainResult`; the model holds the best-validation weights.
@@ -498,5 +540,6 @@ def train_embedding(
 
         train_config = dataclasses.replace(train_config, seed=seed)
     trainer = Trainer(model, train_config, method, device=device, progress_bar=progress_bar,
-                      log_dir=log_dir, checkpoint_path=checkpoint_path)
+                      log_dir=log_dir, checkpoint_path=checkpoint_path,
+                      checkpoint_every=checkpoint_every, epoch_callback=epoch_callback)
     return trainer.fit(data, resume=resume)

@@ -177,3 +177,18 @@ def test_plot_env_latent_map_uses_the_env_protocol(tmp_path):
     assert path.exists()
     with pytest.raises(ValueError, match="pcc_envs environment"):
         plot_env_latent_map(Agent.model, tmp_path / "x.png", env=object())
+
+
+def test_epoch_callback_receives_metrics_and_can_stop():
+    seen = []
+
+    def callback(epoch, metrics):
+        seen.append((epoch, dict(metrics)))
+        return epoch < 2
+
+    _, result = _train(planar_like(96), epoch_callback=callback)
+    assert result.epochs == 2 and [e for e, _ in seen] == [1, 2]
+    assert {"loss", "prediction", "curvature", "val_loss", "epoch_seconds"} <= set(seen[0][1])
+    assert "callback" in result.message
+    summary = result.summary()
+    assert json.loads(json.dumps(summary))["epochs"] == 2 and "history" not in summary
