@@ -281,10 +281,16 @@ def backward_pass(
             try:
                 np.linalg.cholesky(H)
             except np.linalg.LinAlgError:
-                good = np.linalg.eigvalsh(H).min(-1) > 0
+                H, good = _positive_definite_or_identity(H)
                 ok &= good
-                H = np.where(good[:, None, None], H, eye_u)
-            gains = -np.linalg.solve(H, Q[:, nz:nx][..., gain_columns])
+            try:
+                gains = -np.linalg.solve(H, Q[:, nz:nx][..., gain_columns])
+            except np.linalg.LinAlgError:
+                # Positive definite in floating point yet numerically singular (e.g. huge
+                # finite-difference Jacobians): such problems count as a failed pass.
+                H, good = _positive_definite_or_identity(H)
+                ok &= good
+                gains = -np.linalg.solve(H, Q[:, nz:nx][..., gain_columns])
             k_t, K_t = gains[..., nz], gains[..., :nz]
             if ((k_t < lower) | (k_t > upper)).any():
                 k_t, free = box_qp(H, Q_u, lower, upper, k_t)
@@ -304,6 +310,18 @@ def backward_pass(
     K[~finite] = 0.0
     decrease[~finite] = 0.0
     return BackwardPassResult(k, K, decrease, ok)
+
+
+def _positive_definite_or_identity(H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Replace the matrices of ``H`` that are not safely positive definite by the identity.
+
+    Safe means finite, with the smallest eigenvalue above ``1e-12`` times the largest, so that
+    a linear solve with it is well conditioned. Returns the matrices and which were kept.
+    """
+    finite = np.isfinite(H).all((-1, -2))
+    eig = np.linalg.eigvalsh(np.where(finite[:, None, None], H, np.eye(H.shape[-1])))
+    good = finite & (eig[:, 0] > 1e-12 * np.maximum(eig[:, -1], 1.0))
+    return np.where(good[:, None, None], H, np.eye(H.shape[-1])), good
 
 
 def line_search(
