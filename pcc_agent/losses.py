@@ -78,14 +78,17 @@ def curvature_penalty(
     eps_z: torch.Tensor,
     eps_u: torch.Tensor,
     jacobians: tuple[torch.Tensor, torch.Tensor] | None = None,
+    expand_at_perturbed: bool = True,
 ) -> torch.Tensor:
     """Per-sample local-linearity residual of the latent dynamics (paper Eq. for R_LLC).
 
     ``|| f(z_bar, u_bar) - (A eps_z + B eps_u) - f(z, u) ||^2`` with ``z_bar = z + eps_z``,
-    ``u_bar = u + eps_u`` and ``A = df/dz``, ``B = df/du`` evaluated at ``(z_bar, u_bar)``
-    (the paper's practical variant). The Jacobian-vector products come from one batched
-    forward-mode pass (``torch.func.jvp``); with ``jacobians`` given (amortized PCC) the
-    supplied A ``(B, n_z, n_z)`` and B ``(B, n_z, n_u)`` are used instead.
+    ``u_bar = u + eps_u`` and the true Jacobians ``A = df/dz`` (``A[i, j] = df_i / dz_j``),
+    ``B = df/du``, evaluated at ``(z_bar, u_bar)`` (the paper's practical variant, Section 4.2)
+    or, with ``expand_at_perturbed=False``, at ``(z, u)`` (the Section 3 definition). The
+    Jacobian-vector products come from one batched forward-mode pass (``torch.func.jvp``);
+    with ``jacobians`` given (amortized PCC) the supplied A ``(B, n_z, n_z)`` and B
+    ``(B, n_z, n_u)``, evaluated at the same point, are used instead.
 
     Args:
         f: Deterministic dynamics ``(z, u) -> z'`` on batches.
@@ -93,19 +96,23 @@ def curvature_penalty(
         u: Actions ``(B, n_u)``.
         eps_z: Latent perturbations ``(B, n_z)``.
         eps_u: Action perturbations ``(B, n_u)``.
-        jacobians: Optional ``(A, B)`` evaluated at ``(z_bar, u_bar)``.
+        jacobians: Optional ``(A, B)`` evaluated at the expansion point.
+        expand_at_perturbed: Expand around ``(z_bar, u_bar)`` (True) or ``(z, u)`` (False).
 
     Returns:
         Residuals ``(B,)``.
     """
     z_bar, u_bar = z + eps_z, u + eps_u
+    point, other = ((z_bar, u_bar), (z, u)) if expand_at_perturbed else ((z, u), (z_bar, u_bar))
     if jacobians is None:
-        f_bar, linear = jvp(f, (z_bar, u_bar), (eps_z, eps_u))
+        f_point, linear = jvp(f, point, (eps_z, eps_u))
     else:
         a_mat, b_mat = jacobians
-        f_bar = f(z_bar, u_bar)
+        f_point = f(*point)
         linear = (a_mat @ eps_z.unsqueeze(-1) + b_mat @ eps_u.unsqueeze(-1)).squeeze(-1)
-    return (f_bar - linear - f(z, u)).pow(2).sum(dim=-1)
+    f_other = f(*other)
+    f_bar, f_nominal = (f_point, f_other) if expand_at_perturbed else (f_other, f_point)
+    return (f_bar - linear - f_nominal).pow(2).sum(dim=-1)
 
 
 def _check_transition(model: EmbeddingModel, kind: str, method: str) -> None:
@@ -137,8 +144,8 @@ def pcc_loss(
       | z_t, u_t)`` (the same terms without reconstruction);
     * curvature ``R_LLC = || f(z_bar, u_bar) - (A eps_z + B eps_u) - f(z, u) ||^2`` with
       ``eps ~ N(0, delta^2 I)``, ``z ~ E(. | x_t)`` (detached: the term shapes F only, as in the
-      authors' implementation), A, B the true Jacobians at ``(z_bar, u_bar)`` (or the amortized
-      heads when ``amortized``);
+      authors' implementation), A, B the true Jacobians at ``(z_bar, u_bar)`` (or at ``(z, u)``
+      with ``config.curvature_expansion="nominal"``; the amortized heads when ``amortized``);
     * ``L_VAE = -log D(x_t | z) + KL(E(z | x_t) || N(0, I))``, ``z ~ E(. | x_t)``;
     * ``L_det = -log D(x_{t+1} | f(mu(x_t), u_t))`` (deterministic cross-entropy).
 
@@ -193,12 +200,14 @@ def pcc_loss(
             z_c.shape, generator=generator, dtype=z_c.dtype, device=z_c.device)
         eps_u = config.curvature_delta * torch.randn(
             u_c.shape, generator=generator, dtype=u_c.dtype, device=u_c.device)
+        at_perturbed = config.curvature_expansion == "perturbed"
         jacobians = None
         if amortized:
-            out = model.transition_full(z_c + eps_z, u_c + eps_u)
+            out = (model.transition_full(z_c + eps_z, u_c + eps_u) if at_perturbed
+                   else model.transition_full(z_c, u_c))
             jacobians = (out.A, out.B)
         curvature_term = curvature_penalty(
-            model.transition_mean, z_c, u_c, eps_z, eps_u, jacobians).mean()
+            model.transition_mean, z_c, u_c, eps_z, eps_u, jacobians, at_perturbed).mean()
     else:
         curvature_term = torch.zeros((), dtype=mu_t.dtype, device=mu_t.device)
 

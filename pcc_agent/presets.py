@@ -164,6 +164,9 @@ class TrainConfig:
         lambda_c: Weight of the consistency bound R''_2.
         lambda_cur: Weight of the curvature loss R_LLC.
         curvature_delta: Standard deviation delta of the curvature perturbations.
+        curvature_expansion: Point of the Taylor expansion in the curvature loss:
+            ``"perturbed"`` (``(z + eps_z, u + eps_u)``, the paper's practical variant,
+            Section 4.2) or ``"nominal"`` (``(z, u)``, the Section 3 definition).
         vae_coef: Weight of the auxiliary VAE loss (all methods).
         deterministic_ce_coef: Weight of the deterministic cross-entropy term (PCC).
         e2c_lambda: Weight lambda of the E2C transition KL.
@@ -185,6 +188,7 @@ class TrainConfig:
     lambda_c: float = 7.0
     lambda_cur: float = 1.0
     curvature_delta: float = 0.1
+    curvature_expansion: Literal["perturbed", "nominal"] = "perturbed"
     vae_coef: float = 0.01
     deterministic_ce_coef: float = 0.3
     e2c_lambda: float = 0.25
@@ -203,6 +207,11 @@ class TrainConfig:
             )
         if self.curvature_delta <= 0:
             raise ValueError(f"curvature_delta must be > 0, got {self.curvature_delta}.")
+        if self.curvature_expansion not in ("perturbed", "nominal"):
+            raise ValueError(
+                "curvature_expansion must be 'perturbed' or 'nominal', got "
+                f"{self.curvature_expansion!r}."
+            )
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-serializable dict."""

@@ -84,14 +84,19 @@ def test_curvature_zero_for_linear_dynamics_with_nonsymmetric_matrix():
     assert curvature_penalty(f, z, u, ez, eu, transposed).min() > 1e-6
 
 
-def test_curvature_of_quadratic_dynamics_is_positive_and_exact():
-    # f(z, u) = z^2 + u: residual = || -eps_z^2 ||^2 = sum eps_z^4 (Taylor at z + eps).
+@pytest.mark.parametrize("at_perturbed", [True, False])
+def test_curvature_of_quadratic_dynamics_is_positive_and_exact(at_perturbed):
+    # f(z, u) = z^2 + u: residual = || eps_z^2 ||^2 = sum eps_z^4 at either expansion point.
     g = torch.Generator().manual_seed(4)
     z, u = torch.randn(6, 2, generator=g), torch.randn(6, 2, generator=g)
     ez, eu = 0.1 * torch.randn(6, 2, generator=g), 0.1 * torch.randn(6, 2, generator=g)
-    value = curvature_penalty(lambda a, b: a.pow(2) + b, z, u, ez, eu)
+    value = curvature_penalty(lambda a, b: a.pow(2) + b, z, u, ez, eu,
+                              expand_at_perturbed=at_perturbed)
     torch.testing.assert_close(value, ez.pow(4).sum(-1))
     assert (value > 0).all()
+    linear = curvature_penalty(lambda a, b: a @ torch.tensor([[1.0, 2.0], [0.0, 3.0]]) + b,
+                               z, u, ez, eu, expand_at_perturbed=at_perturbed)
+    assert linear.abs().max() < 1e-10
 
 
 def test_amortized_curvature_equals_exact_with_true_jacobians():
@@ -103,6 +108,11 @@ def test_amortized_curvature_equals_exact_with_true_jacobians():
     exact = curvature_penalty(model.transition_mean, z, u, ez, eu)
     amortized = curvature_penalty(model.transition_mean, z, u, ez, eu, jac)
     torch.testing.assert_close(amortized, exact, rtol=1e-5, atol=1e-9)
+    jac0 = model.linearize(z, u)
+    exact0 = curvature_penalty(model.transition_mean, z, u, ez, eu, expand_at_perturbed=False)
+    torch.testing.assert_close(
+        curvature_penalty(model.transition_mean, z, u, ez, eu, jac0, expand_at_perturbed=False),
+        exact0, rtol=1e-5, atol=1e-9)
 
 
 @pytest.mark.parametrize("method", sorted(METHODS))
