@@ -26,7 +26,6 @@ import torch
 from torch.func import jvp
 
 from pcc_agent.distributions import (
-    bernoulli_log_likelihood,
     gaussian_entropy,
     gaussian_kl,
     gaussian_kl_standard,
@@ -168,7 +167,9 @@ def pcc_loss(
         raise ValueError("Amortized curvature needs ModelConfig(amortized=True).")
     x_t, u, x_next = batch
     n = x_t.shape[0]
-    mean_all, logvar_all = model.encode(torch.cat([x_t, x_next], dim=0))
+    images = to_float_image(torch.cat([x_t, x_next], dim=0))  # converted once, reused below
+    x_t, x_next = images[:n], images[n:]
+    mean_all, logvar_all = model.encode(images)
     mu_t, mu_n = mean_all[:n], mean_all[n:]
     lv_t, lv_n = logvar_all[:n], logvar_all[n:]
 
@@ -180,9 +181,8 @@ def pcc_loss(
     # One transition pass for F(. | z_t, u) and f(mu(x_t), u); one decoder pass for all images.
     f_mean, f_logvar = model.transition(torch.cat([z_t, mu_t]), torch.cat([u, u]))
     trans_mean, trans_logvar, det_next = f_mean[:n], f_logvar[:n], f_mean[n:]
-    logits = model.decode_logits(torch.cat([z_hat_next, z_vae, det_next]))
-    targets = to_float_image(torch.cat([x_next, x_t, x_next]))
-    log_lik = bernoulli_log_likelihood(logits, targets)
+    log_lik = model.log_likelihood(torch.cat([z_hat_next, z_vae, det_next]),
+                                   torch.cat([x_next, x_t, x_next]))
     recon_next, recon_t, det_ll = log_lik[:n], log_lik[n:2 * n], log_lik[2 * n:]
 
     kl_backward = gaussian_kl(back_mean, back_logvar, mu_t, lv_t).mean()
@@ -312,7 +312,8 @@ def e2c_loss(
     _check_transition(model, "e2c_linear", "e2c")
     x_t, u, x_next = batch
     n = x_t.shape[0]
-    mean_all, logvar_all = model.encode(torch.cat([x_t, x_next], dim=0))
+    images = to_float_image(torch.cat([x_t, x_next], dim=0))
+    mean_all, logvar_all = model.encode(images)
     mu_t, mu_n = mean_all[:n], mean_all[n:]
     lv_t, lv_n = logvar_all[:n], logvar_all[n:]
     z_t = gaussian_rsample(mu_t, lv_t, generator)
@@ -324,8 +325,7 @@ def e2c_loss(
     z_hat_next = z_t + v * (r * z_t).sum(-1, keepdim=True) + bu_o
     m = mu_t + v * (r * mu_t).sum(-1, keepdim=True) + bu_o
 
-    logits = model.decode_logits(torch.cat([z_t, z_hat_next]))
-    log_lik = bernoulli_log_likelihood(logits, to_float_image(torch.cat([x_t, x_next])))
+    log_lik = model.log_likelihood(torch.cat([z_t, z_hat_next]), images)
     reconstruction = -log_lik[:n].mean()
     prediction = -log_lik[n:].mean()
     kl_prior = gaussian_kl_standard(mu_t, lv_t).mean()
@@ -369,7 +369,9 @@ def rce_loss(
     _check_transition(model, "e2c_linear", "rce")
     x_t, u, x_next = batch
     n = x_t.shape[0]
-    mean_all, logvar_all = model.encode(torch.cat([x_t, x_next], dim=0))
+    images = to_float_image(torch.cat([x_t, x_next], dim=0))
+    x_t, x_next = images[:n], images[n:]
+    mean_all, logvar_all = model.encode(images)
     mu_t, mu_n = mean_all[:n], mean_all[n:]
     lv_t, lv_n = logvar_all[:n], logvar_all[n:]
     z_hat_next = gaussian_rsample(mu_n, lv_n, generator)
@@ -378,8 +380,7 @@ def rce_loss(
     z_vae = gaussian_rsample(mu_t, lv_t, generator)
     trans_mean, trans_logvar = model.transition(z_t, u)
 
-    logits = model.decode_logits(torch.cat([z_hat_next, z_vae]))
-    log_lik = bernoulli_log_likelihood(logits, to_float_image(torch.cat([x_next, x_t])))
+    log_lik = model.log_likelihood(torch.cat([z_hat_next, z_vae]), torch.cat([x_next, x_t]))
     reconstruction = -log_lik[:n].mean()
     kl_backward = gaussian_kl(back_mean, back_logvar, mu_t, lv_t).mean()
     entropy = gaussian_entropy(lv_n).mean()

@@ -14,7 +14,7 @@ import torch
 from torch import nn
 from torch.func import jacrev, jvp, vmap
 
-from pcc_agent.networks import TransitionOutput, build_networks
+from pcc_agent.networks import TransitionOutput, build_networks, to_float_image
 from pcc_agent.presets import ModelConfig
 
 
@@ -132,6 +132,15 @@ class EmbeddingModel(nn.Module):
     def decode_logits(self, z: torch.Tensor) -> torch.Tensor:
         """Bernoulli logits of D(x | z), shaped ``(B, F, H, W)``."""
         return self.decoder(z)
+
+    def log_likelihood(self, z: torch.Tensor, obs: torch.Tensor) -> torch.Tensor:
+        """``log D(obs | z)`` per sample, ``(B,)``; ``obs`` uint8 or float in [0, 1].
+
+        Equal to ``bernoulli_log_likelihood(decode_logits(z), obs / 255)`` but computed at the
+        decoder's native resolution when its logits are upsampled (see
+        :meth:`pcc_agent.networks.BernoulliDecoder.log_likelihood`).
+        """
+        return self.decoder.log_likelihood(z, to_float_image(obs))
 
     def decode(self, z: torch.Tensor) -> torch.Tensor:
         """Pixel probabilities ``sigmoid(logits)`` in [0, 1]."""

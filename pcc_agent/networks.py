@@ -27,6 +27,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from pcc_agent.distributions import bernoulli_log_likelihood
 from pcc_agent.presets import ConvSpec, ModelConfig
 
 
@@ -164,6 +165,23 @@ class BernoulliDecoder(nn.Module):
         if self.output_upsample > 1:
             x = F.interpolate(x, scale_factor=self.output_upsample, mode="nearest")
         return x[..., : self.obs_shape[1], : self.obs_shape[2]]
+
+    def log_likelihood(self, z: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """``log D(target | z)`` summed per sample, ``(B,)``; ``target`` float in [0, 1].
+
+        When the logits are a nearest-neighbour upsampling by k of a low-resolution map, each
+        low-resolution logit l covers k*k pixels and ``sum_i BCE(l, t_i) = k^2 BCE(l,
+        mean_i t_i)``, so the likelihood is computed exactly at low resolution against the
+        average-pooled target (k^2 times cheaper, no upsampling in the graph).
+        """
+        k = self.output_upsample if self.kind == "cnn" else 1
+        _, height, width = self.obs_shape
+        if k > 1 and height % k == 0 and width % k == 0:
+            low = self.convs(self.fc(z).view(z.shape[0], *self.grid))
+            if low.shape[-2:] == (height // k, width // k):
+                pooled = F.avg_pool2d(target, k)
+                return (k * k) * bernoulli_log_likelihood(low, pooled)
+        return bernoulli_log_likelihood(self(z), target)
 
 
 class TransitionOutput(NamedTuple):

@@ -292,18 +292,27 @@ def _paper_cnn_model(
 
 
 def _fast_cnn_model(latent_dim: int, hidden: int, backward: int) -> ModelConfig:
-    """CPU-friendly CNN: 2x downsampled input, strided 16-channel convs, half-resolution decoder."""
+    """CPU-friendly CNN for 80x80 two-frame input.
+
+    The encoder average-pools the image to 40x40 and uses three strided convolutions
+    (40 -> 20 -> 10 -> 5); the decoder maps z to a 10x10 grid, one 16-channel convolution, a 2x
+    upsampling and a convolution to 20x20 logits that are upsampled 4x (the likelihood is then
+    evaluated exactly at 20x20 against the average-pooled image, see
+    ``BernoulliDecoder.log_likelihood``). Small-channel convolutions are slow on CPUs, so the
+    decoder resolution is the main speed knob: this variant trains about 10x faster than the
+    paper's CNN on a CPU.
+    """
     return ModelConfig(
         latent_dim=latent_dim,
         encoder_kind="cnn",
-        encoder_convs=(ConvSpec(16, 5, 2), ConvSpec(16, 5, 2), ConvSpec(10, 3, 2)),
+        encoder_convs=(ConvSpec(16, 5, 2), ConvSpec(16, 3, 2), ConvSpec(10, 3, 2)),
         encoder_hidden=(hidden,),
         encoder_downsample=2,
         decoder_kind="cnn",
         decoder_hidden=(hidden,),
         decoder_grid_channels=8,
-        decoder_convs=(ConvSpec(16, 3, 1), ConvSpec(16, 3, 1), ConvSpec(2, 3, 1)),
-        decoder_output_upsample=2,
+        decoder_convs=(ConvSpec(16, 3, 1), ConvSpec(2, 3, 1)),
+        decoder_output_upsample=4,
         transition_hidden=(40, 40),
         backward_nz=10,
         backward_nu=10,

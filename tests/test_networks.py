@@ -121,3 +121,16 @@ def test_model_config_round_trip():
     for env_id in PRESETS:
         for preset in PRESETS[env_id].values():
             assert ModelConfig.from_dict(preset.model.to_dict()) == preset.model
+
+
+@pytest.mark.parametrize("env_id", ["pcc/Planar-v0", "pcc/CartPole-v0"])
+def test_low_resolution_likelihood_is_exact(env_id):
+    from pcc_agent.distributions import bernoulli_log_likelihood
+
+    config = get_preset(env_id, "fast").model
+    model = EmbeddingModel(OBS_SHAPES[env_id], ACTION_DIMS[env_id], config, seed=0)
+    g = torch.Generator().manual_seed(0)
+    z = torch.randn(3, config.latent_dim, generator=g)
+    obs = torch.randint(0, 256, (3, *OBS_SHAPES[env_id]), dtype=torch.uint8, generator=g)
+    expected = bernoulli_log_likelihood(model.decode_logits(z), obs.float() / 255)
+    torch.testing.assert_close(model.log_likelihood(z, obs), expected, rtol=1e-5, atol=1e-2)
