@@ -30,6 +30,15 @@ SMALL = ModelConfig(latent_dim=3, encoder_hidden=(32,), decoder_hidden=(32,),
                     backward_joint=16)
 
 
+@pytest.fixture(autouse=True)
+def _single_thread():
+    """Small models: one intra-op thread is as fast and immune to a busy shared machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 def _normal(mean, logvar):
     return td.Independent(td.Normal(mean, torch.exp(0.5 * logvar)), 1)
 

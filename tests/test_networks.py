@@ -23,6 +23,15 @@ SMALL = ModelConfig(latent_dim=3, encoder_hidden=(32,), decoder_hidden=(32,),
                     backward_joint=16)
 
 
+@pytest.fixture(autouse=True)
+def _single_thread():
+    """Small models: one intra-op thread is as fast and immune to a busy shared machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 @pytest.mark.parametrize(
     ("env_id", "variant"), [(e, v) for e in PRESETS for v in PRESETS[e]]
 )

@@ -25,6 +25,15 @@ TRAIN = TrainConfig(epochs=3, batch_size=32, validation_fraction=0.2, patience=0
                     lr=2e-3)
 
 
+@pytest.fixture(autouse=True)
+def _single_thread():
+    """Small models: one intra-op thread is as fast and immune to a busy shared machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 def planar_like(n: int, seed: int = 0):
     """A bright 3x3 square at a random position, moved by the (scaled) action."""
     rng = np.random.default_rng(seed)
