@@ -156,6 +156,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser.add_argument("--patience", type=int, default=30)
     parser.add_argument("--no-progress", action="store_true")
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
+    parser.add_argument("--append", action="store_true",
+                        help="merge into the output file (rows with the same env, method, "
+                             "variant, mode and threads are replaced)")
     args = parser.parse_args(argv)
     if args.threads > 0:
         torch.set_num_threads(args.threads)
@@ -173,6 +176,14 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     for row in rows:
         row.update(torch=torch.__version__, machine=platform.machine())
     args.output.parent.mkdir(parents=True, exist_ok=True)
+    if args.append and args.output.exists():
+        def key(row: dict[str, Any]) -> tuple:
+            return (row["env"], row["method"], row["variant"], row.get("mode", "epoch"),
+                    row["threads"])
+
+        new_keys = {key(row) for row in rows}
+        old = [row for row in json.loads(args.output.read_text()) if key(row) not in new_keys]
+        rows = old + rows
     args.output.write_text(json.dumps(rows, indent=2) + "\n")
     print(f"wrote {args.output}")
     return rows
