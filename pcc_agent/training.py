@@ -183,8 +183,9 @@ class Trainer:
         log_dir: Directory of the Stable-Baselines3 logger (stdout, csv, tensorboard when
             installed); None disables logging.
         checkpoint_path: File written atomically every ``checkpoint_every`` epochs (current
-            weights plus the
-            optimizer and RNG state for resuming; at the end the best weights). A JSON copy of
+            weights plus the optimizer and RNG state; at the end the best weights, with the
+            last epoch's weights kept for resuming, so that a resumed run continues exactly
+            where an uninterrupted one would be). A JSON copy of
             the configuration is written beside it (same name, ``.json`` suffix).
         run_info: Extra JSON-serializable information stored in the checkpoint config.
         checkpoint_every: Epochs between resumable checkpoints (the final one is always
@@ -287,7 +288,15 @@ class Trainer:
         self.model.train()
         return total / max(count, 1)
 
-    def _save(self, result: TrainResult, state: dict[str, Any], finished: bool) -> None:
+    def _save(
+        self, result: TrainResult, state: dict[str, Any], finished: bool,
+        current_state_dict: dict[str, torch.Tensor] | None = None,
+    ) -> None:
+        """Write the checkpoint: the model's weights plus everything needed to resume exactly.
+
+        ``current_state_dict`` (final save only) holds the weights training would continue
+        from when the model itself has been reset to the best epoch's weights.
+        """
         if self.checkpoint_path is None:
             return
         extra = {
@@ -296,14 +305,14 @@ class Trainer:
             "finished": finished, "converged": result.converged, "diverged": result.diverged,
             "bad_epochs": state["bad_epochs"],
         }
-        training_state: dict[str, Any] = {}
-        if not finished:
-            training_state = {
-                "optimizer": self.optimizer.state_dict(),
-                "shuffle_rng": self.shuffle_generator.get_state(),
-                "noise_rng": self.noise_generator.get_state().cpu(),
-                "best_state_dict": state["best_state_dict"],
-            }
+        training_state: dict[str, Any] = {
+            "optimizer": self.optimizer.state_dict(),
+            "shuffle_rng": self.shuffle_generator.get_state(),
+            "noise_rng": self.noise_generator.get_state().cpu(),
+            "best_state_dict": state["best_state_dict"],
+        }
+        if current_state_dict is not None:
+            training_state["current_state_dict"] = current_state_dict
         save_checkpoint(self.checkpoint_path, self.model, self._config_dict(),
                         extra=json.loads(json.dumps(extra, default=float)),
                         state=training_state)
@@ -333,7 +342,9 @@ class Trainer:
             self.shuffle_generator.set_state(saved["shuffle_rng"])
             self.noise_generator.set_state(saved["noise_rng"])
             state["best_state_dict"] = saved["best_state_dict"]
-        else:  # a finished checkpoint holds the best weights only
+            if "current_state_dict" in saved:  # finished run: continue from its last epoch
+                self.model.load_state_dict(saved["current_state_dict"])
+        else:
             state["best_state_dict"] = copy.deepcopy(self.model.state_dict())
 
     # ------------------------------------------------------------------ main loop
@@ -467,10 +478,13 @@ class Trainer:
                 bar.close()
             if self._logger is not None:
                 self._logger.close()
+        current = None
+        if self.checkpoint_path is not None:
+            current = {k: v.detach().cpu().clone() for k, v in self.model.state_dict().items()}
         if result.best_epoch > 0:
             self.model.load_state_dict(state["best_state_dict"])
         result.wall_time = time.perf_counter() - start_time
-        self._save(result, state, finished=True)
+        self._save(result, state, finished=True, current_state_dict=current)
         return result
 
     @staticmethod

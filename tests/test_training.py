@@ -95,9 +95,12 @@ def test_checkpoint_round_trip_and_resume(tmp_path):
     obs = torch.from_numpy(data[0][:8])
     with torch.no_grad():
         torch.testing.assert_close(loaded.encode(obs)[0], model.encode(obs)[0], rtol=0, atol=0)
-    _, resumed = _train(data, config=dataclasses.replace(config, epochs=3),
-                        checkpoint_path=path, resume=True)
+    resumed_model, resumed = _train(data, config=dataclasses.replace(config, epochs=3),
+                                    checkpoint_path=path, resume=True)
     assert resumed.epochs == 3 and len(resumed.history) == 3
+    straight, _ = _train(data, config=dataclasses.replace(config, epochs=3))
+    for a, b in zip(straight.state_dict().values(), resumed_model.state_dict().values()):
+        assert torch.equal(a, b)  # resuming continues exactly where an uninterrupted run is
 
 
 def test_corrupt_and_mismatched_checkpoints_raise(tmp_path):
