@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import torch
 from torch.func import jvp
@@ -104,7 +104,8 @@ def curvature_penalty(
     z_bar, u_bar = z + eps_z, u + eps_u
     point, other = ((z_bar, u_bar), (z, u)) if expand_at_perturbed else ((z, u), (z_bar, u_bar))
     if jacobians is None:
-        f_point, linear = jvp(f, point, (eps_z, eps_u))
+        primal_and_tangent = jvp(f, point, (eps_z, eps_u))
+        f_point, linear = primal_and_tangent[0], primal_and_tangent[1]
     else:
         a_mat, b_mat = jacobians
         f_point = f(*point)
@@ -205,6 +206,7 @@ def pcc_loss(
         if amortized:
             out = (model.transition_full(z_c + eps_z, u_c + eps_u) if at_perturbed
                    else model.transition_full(z_c, u_c))
+            assert out.A is not None and out.B is not None
             jacobians = (out.A, out.B)
         curvature_term = curvature_penalty(
             model.transition_mean, z_c, u_c, eps_z, eps_u, jacobians, at_perturbed).mean()
@@ -406,7 +408,7 @@ class MethodSpec:
 
     name: str
     loss: LossFunction
-    model_options: dict[str, object]
+    model_options: dict[str, Any]
 
 
 _MLP = {"transition_kind": "mlp", "amortized": False}

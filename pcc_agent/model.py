@@ -95,7 +95,8 @@ class EmbeddingModel(nn.Module):
         Differentiable with respect to the parameters and to ``z``, ``u`` (used by the
         curvature loss).
         """
-        return jvp(self.dynamics.mean, (z, u), (dz, du))
+        out = jvp(self.transition_mean, (z, u), (dz, du))
+        return out[0], out[1]
 
     def linearize(
         self, z: torch.Tensor, u: torch.Tensor, exact: bool | None = None
@@ -125,7 +126,7 @@ class EmbeddingModel(nn.Module):
             out = self.dynamics(z, u)
             return out.A, out.B
         lead = z.shape[:-1]
-        a_mat, b_mat = vmap(jacrev(self.dynamics.mean, argnums=(0, 1)))(
+        a_mat, b_mat = vmap(jacrev(self.transition_mean, argnums=(0, 1)))(
             z.reshape(-1, z.shape[-1]), u.reshape(-1, u.shape[-1]))
         return (a_mat.reshape(*lead, *a_mat.shape[1:]), b_mat.reshape(*lead, *b_mat.shape[1:]))
 

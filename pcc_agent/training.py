@@ -154,12 +154,12 @@ class TrainResult:
 
 def _make_adam(model: torch.nn.Module, config: TrainConfig) -> torch.optim.Adam:
     """Adam with coupled L2 weight decay; the fused kernel when this torch build has one."""
-    kwargs = dict(lr=config.lr, betas=config.betas, eps=config.eps,
-                  weight_decay=config.weight_decay)
     try:
-        return torch.optim.Adam(model.parameters(), fused=True, **kwargs)
+        return torch.optim.Adam(model.parameters(), lr=config.lr, betas=config.betas,
+                                eps=config.eps, weight_decay=config.weight_decay, fused=True)
     except (RuntimeError, TypeError):  # fused Adam unsupported for this device / version
-        return torch.optim.Adam(model.parameters(), **kwargs)
+        return torch.optim.Adam(model.parameters(), lr=config.lr, betas=config.betas,
+                                eps=config.eps, weight_decay=config.weight_decay)
 
 
 EpochCallback = Callable[[int, dict[str, float]], bool | None]
