@@ -452,17 +452,20 @@ def get_preset(env_id: str, variant: str = "paper") -> EnvPreset:
 
 
 def default_preset_for_spaces(
-    obs_space: gym.spaces.Space, action_space: gym.spaces.Space, env_id: str = "custom"
+    obs_space: gym.spaces.Space, action_space: gym.spaces.Space, env_id: str = "custom",
+    variant: str = "paper",
 ) -> EnvPreset:
     """Build a reasonable preset for an environment without a table entry.
 
     Images with at most 48x48 pixels get the MLP architecture of the Pendulum domain (Planar's
-    for a single frame); larger images get the paper's CNN architecture (CartPole's).
+    for a single frame); larger images get the paper's CNN architecture (CartPole's), or with
+    ``variant="fast"`` the CPU-friendly CNN of the ``"fast"`` presets.
 
     Args:
         obs_space: ``Box`` of uint8 images shaped ``(frames, H, W)``.
         action_space: ``Box`` of shape ``(n,)``.
         env_id: Name stored in the preset.
+        variant: ``"paper"`` or ``"fast"`` (only changes the CNN used for large images).
 
     Returns:
         An :class:`EnvPreset` with default training and planner settings.
@@ -486,8 +489,13 @@ def default_preset_for_spaces(
         latent_dim = max(base.latent_dim, min(8, math.ceil(action_dim * 1.5)))
         model = dataclasses.replace(base, latent_dim=latent_dim)
     else:
+        if variant not in ("paper", "fast"):
+            raise ValueError(f"variant must be 'paper' or 'fast', got {variant!r}.")
+        base = _CARTPOLE_MODEL if variant == "paper" else _fast_cnn_model(8, 200, 200)
+        last = base.decoder_convs[-1]
         model = dataclasses.replace(
-            _CARTPOLE_MODEL,
-            decoder_convs=_CARTPOLE_MODEL.decoder_convs[:-1] + (ConvSpec(frames, 5, 1),),
+            base,
+            decoder_convs=base.decoder_convs[:-1]
+            + (ConvSpec(frames, last.kernel_size, last.stride),),
         )
     return EnvPreset(env_id, model, TrainConfig(), DataConfig(num_samples=20000), PlannerConfig())

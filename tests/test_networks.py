@@ -122,6 +122,13 @@ def test_default_preset_for_foreign_spaces():
     with torch.no_grad():
         z = model.encode(torch.zeros(1, 3, 96, 72, dtype=torch.uint8))[0]
         assert model.decode_logits(z).shape == (1, 3, 96, 72)
+    fast = default_preset_for_spaces(gym.spaces.Box(0, 255, (3, 96, 72), np.uint8), act,
+                                     variant="fast")
+    model = EmbeddingModel((3, 96, 72), 2, fast.model, seed=0)
+    with torch.no_grad():
+        z = model.encode(torch.zeros(1, 3, 96, 72, dtype=torch.uint8))[0]
+        assert model.decode_logits(z).shape == (1, 3, 96, 72)
+        assert model.log_likelihood(z, torch.zeros(1, 3, 96, 72)).shape == (1,)
     with pytest.raises(ValueError, match="image observation"):
         default_preset_for_spaces(gym.spaces.Box(-1, 1, (4,), np.float32), act)
 
