@@ -11,7 +11,9 @@ does not depend on image content).
 stopping) and reports the epochs and wall time until early stopping.
 
 Results go to ``benchmarks/results/train_speed.json`` (a list of rows: env, method, variant,
-seconds_per_epoch, samples_per_second, device, threads, num_samples, batch_size, ...).
+seconds_per_epoch, samples_per_second, device, threads, num_samples, batch_size, ...; and the
+1-minute load average before / after the measurement: on a shared machine, more torch threads
+than idle cores make timings collapse, so ``--threads 1`` is the robust setting there).
 
 Usage:
     python -m benchmarks.train_speed                                  # Planar PCC, paper size
@@ -24,6 +26,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import platform
 import statistics
 import time
@@ -171,7 +174,11 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         for env_id in envs:
             for variant in args.variants:
                 for method in args.methods:
+                    load_before = os.getloadavg()[0]
                     rows.append(measure(env_id, variant, method, args))
+                    # other processes on the machine distort timings (threads oversubscribed)
+                    rows[-1]["load_average_1min"] = [round(load_before, 2),
+                                                     round(os.getloadavg()[0], 2)]
                     print(json.dumps(rows[-1]))
     for row in rows:
         row.update(torch=torch.__version__, machine=platform.machine())
