@@ -35,7 +35,6 @@ from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
-from pcc_agent.planning.dynamics import ModelDynamics
 from pcc_agent.planning.ilqr import plan
 from pcc_agent.presets import (
     DataConfig,
@@ -392,7 +391,7 @@ class PCCAgent:
         z_all, _ = self.model.encode(both)
         z0, goal = z_all[:n], z_all[n]
         cost = self._cost(goal)
-        dynamics = ModelDynamics(self.model)
+        dynamics = self.model.planner_dynamics()
         config = self.preset.planner
         fresh = np.ones(n, dtype=bool)
         warm = None

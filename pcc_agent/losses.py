@@ -190,9 +190,10 @@ def pcc_loss(
     entropy = gaussian_entropy(lv_n).mean()
     transition_nll = -gaussian_log_prob(z_hat_next, trans_mean, trans_logvar).mean()
     reconstruction = -recon_next.mean()
+    beta = config.kl_scale
     consistency_term = kl_backward - entropy + transition_nll
-    prediction = reconstruction + consistency_term
-    vae = -recon_t.mean() + gaussian_kl_standard(mu_t, lv_t).mean()
+    prediction = reconstruction + beta * consistency_term
+    vae = -recon_t.mean() + beta * gaussian_kl_standard(mu_t, lv_t).mean()
     deterministic = -det_ll.mean()
 
     if curvature:
@@ -215,7 +216,7 @@ def pcc_loss(
 
     loss = (
         config.lambda_p * prediction
-        + (config.lambda_c * consistency_term if consistency else 0.0)
+        + (config.lambda_c * beta * consistency_term if consistency else 0.0)
         + (config.lambda_cur * curvature_term if curvature else 0.0)
         + config.vae_coef * vae
         + config.deterministic_ce_coef * deterministic
@@ -334,8 +335,9 @@ def e2c_loss(
 
     kl_transition = locally_linear_kl(m, v, r, lv_t, mu_n, lv_n).mean()
 
-    vae = reconstruction + kl_prior
-    loss = (reconstruction + prediction + kl_prior + config.e2c_lambda * kl_transition
+    beta = config.kl_scale
+    vae = reconstruction + beta * kl_prior
+    loss = (reconstruction + prediction + beta * (kl_prior + config.e2c_lambda * kl_transition)
             + config.vae_coef * vae)
     return loss, _metrics(loss=loss, reconstruction=reconstruction, prediction=prediction,
                           kl_prior=kl_prior, kl_transition=kl_transition)
@@ -388,8 +390,9 @@ def rce_loss(
     entropy = gaussian_entropy(lv_n).mean()
     transition_nll = -gaussian_log_prob(z_hat_next, trans_mean, trans_logvar).mean()
     elbo = -(reconstruction + kl_backward - entropy + transition_nll)
-    vae = -log_lik[n:].mean() + gaussian_kl_standard(mu_t, lv_t).mean()
-    loss = -elbo + config.vae_coef * vae
+    beta = config.kl_scale
+    vae = -log_lik[n:].mean() + beta * gaussian_kl_standard(mu_t, lv_t).mean()
+    loss = reconstruction + beta * (kl_backward - entropy + transition_nll) + config.vae_coef * vae
     return loss, _metrics(loss=loss, elbo=elbo, reconstruction=reconstruction,
                           kl_backward=kl_backward, entropy=entropy,
                           transition_nll=transition_nll, vae=vae)

@@ -231,6 +231,17 @@ class MLPTransition(nn.Module):
         delta = self.head(self.backbone(torch.cat([z, u], dim=-1)))[..., : self.nz]
         return z + delta
 
+    def mean_layers(self) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Weights and biases of the mean path ``z + W_L relu(... relu(W_1 [z; u]))``.
+
+        Used to build an analytic-Jacobian planner model
+        (:class:`pcc_agent.planning.dynamics.MLPDynamics` with ``residual=True``).
+        """
+        linears = [m for m in self.backbone if isinstance(m, nn.Linear)]
+        weights = [m.weight for m in linears] + [self.head.weight[: self.nz]]
+        biases = [m.bias for m in linears] + [self.head.bias[: self.nz]]
+        return weights, biases
+
 
 class E2CTransition(nn.Module):
     """Locally-linear transition of E2C / RCE: ``z' = A(z) z + B(z) u + o(z)``.

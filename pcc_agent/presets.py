@@ -176,6 +176,12 @@ class TrainConfig:
         min_delta: Improvement smaller than this does not reset the patience counter.
         grad_clip_norm: Optional gradient-norm clip (None = no clipping, as in the paper).
         divergence_factor: Training stops when a loss exceeds this factor times the best loss.
+        warmup_epochs: Epochs over which the latent-regularization terms (KL divergences,
+            entropy and transition likelihood of every method, PCC's consistency) are scaled
+            linearly from 0 to 1 (beta-annealing against posterior collapse, the failure
+            that leaves short trainings with a collapsed latent space); 0 disables it.
+        kl_scale: Current scale of those terms (set per epoch by the trainer during warm-up;
+            1.0 is the paper's objective).
     """
 
     lr: float = 5e-4
@@ -198,6 +204,8 @@ class TrainConfig:
     min_delta: float = 0.0
     grad_clip_norm: float | None = None
     divergence_factor: float = 1e3
+    warmup_epochs: int = 0
+    kl_scale: float = 1.0
 
     def __post_init__(self) -> None:
         """Validate the values, with messages that say how to fix them."""

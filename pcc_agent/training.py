@@ -12,6 +12,7 @@ runs with the same seed, initial weights and thread count produce bitwise-identi
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 import time
@@ -232,6 +233,13 @@ class Trainer:
         self._logger: Any = None
 
     # ------------------------------------------------------------------ helpers
+    def _epoch_config(self, epochs_done: int) -> TrainConfig:
+        """The config of the next epoch: ``kl_scale`` ramps up during ``warmup_epochs``."""
+        if self.config.warmup_epochs <= 0:
+            return self.config
+        scale = min(1.0, (epochs_done + 1) / self.config.warmup_epochs)
+        return dataclasses.replace(self.config, kl_scale=scale * self.config.kl_scale)
+
     def _config_dict(self) -> dict[str, Any]:
         return {"method": self.method, "train_config": self.config.to_dict(),
                 "model": self.model.architecture(), **self.run_info}
@@ -402,11 +410,12 @@ class Trainer:
                 sums: dict[str, float] = {}
                 seen = 0
                 order = train_idx[torch.randperm(len(train_idx), generator=self.shuffle_generator)]
+                epoch_config = self._epoch_config(result.epochs)
                 try:
                     for start in range(0, len(order), self.config.batch_size):
                         idx = order[start:start + self.config.batch_size].to(self.device)
                         loss, metrics = self.loss_fn(self.model, self._batch(tensors, idx),
-                                                     self.config, self.noise_generator)
+                                                     epoch_config, self.noise_generator)
                         self._check(metrics["loss"], best_train)
                         self.optimizer.zero_grad(set_to_none=True)
                         loss.backward()
