@@ -182,6 +182,12 @@ def _maybe_plot_latent_map(agent: Any, spec: RunSpec, results_dir: Path) -> None
     plot_env_latent_map(agent, out / name, title=f"{spec.method} seed {spec.seed}")
 
 
+def _has_oracle(env_id: str) -> bool:
+    from pcc_agent.oracle import ORACLE_CONFIGS
+
+    return env_id in ORACLE_CONFIGS
+
+
 def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[RunSpec]:
     """All runs of a preset, oracle runs first (one per env and noise level)."""
     runs: list[RunSpec] = []
@@ -195,7 +201,7 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[Ru
                 "model_variant": preset.model_variant,
                 "preset": preset.name,
             }
-            if include_oracle:
+            if include_oracle and _has_oracle(env_id):
                 runs.append(RunSpec(method=ORACLE, seed=0, **common))
             for seed in range(preset.num_models):
                 for method in preset.methods:
@@ -466,15 +472,32 @@ def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def estimate_seconds(runs: Sequence[RunSpec]) -> float:
-    """A rough cost estimate (CPU, one core per run) from measured per-env training times."""
-    per_run = {"pcc/Planar-v0": 120, "pcc/PendulumSwingUp-v0": 600, "pcc/PendulumBalance-v0": 600}
+    """Rough cost (one CPU core per run): measured seconds per epoch x the epoch cap.
+
+    Seconds per epoch come from ``benchmarks/results/train_speed.json`` (this machine's
+    measurements, 1 thread) where it has the (env, method, variant), otherwise from a
+    conservative per-sample guess. Early stopping can make a run shorter.
+    """
+    from pcc_agent.presets import get_preset
+
+    measured: dict[tuple[str, str, str], float] = {}
+    speed_file = Path(__file__).resolve().parent / "results" / "train_speed.json"
+    if speed_file.exists():
+        for row in json.loads(speed_file.read_text()):
+            per_sample = row["seconds_per_epoch"] / row["num_samples"]
+            measured[(row["env"], row["method"], row["variant"])] = per_sample
     total = 0.0
     for r in runs:
         if r.method == ORACLE:
-            total += 60
+            total += 300.0
             continue
-        base = per_run.get(r.env_id, 900 if r.model_variant == "fast" else 14400)
-        total += base
+        preset = get_preset(r.env_id, r.model_variant)
+        samples = r.num_samples or preset.data.num_samples
+        epochs = r.max_epochs or preset.train.epochs
+        cnn = preset.model.encoder_kind == "cnn"
+        guess = 0.1 if cnn and r.model_variant == "paper" else (2e-3 if cnn else 7e-4)
+        per_sample = measured.get((r.env_id, r.method, r.model_variant), guess)
+        total += per_sample * samples * epochs
     return total
 
 

@@ -1,0 +1,30 @@
+"""Smoke test of the SAC comparison: tiny budget, both observation kinds, outputs written."""
+
+from __future__ import annotations
+
+import json
+
+from benchmarks import vs_sac
+
+
+def test_vs_sac_tiny_budget(tmp_path):
+    out = tmp_path / "vs_sac"
+    code = vs_sac.main([
+        "--env", "pcc/Planar-v0", "--steps", "120", "--checkpoints", "60", "--seeds", "0",
+        "--num-tasks", "1", "--buffer-size", "500", "--threads", "1",
+        "--results-dir", str(out), "--reproduce-dir", str(tmp_path / "none"),
+    ])
+    assert code == 0
+    summary = json.loads((out / "Planar-v0.json").read_text())
+    for policy in ("sac_image", "sac_state"):
+        curve = summary["sac"][policy]
+        assert [p["env_steps"] for p in curve] == [60, 120]
+        assert all(0.0 <= p["mean"] <= 100.0 for p in curve)
+    assert (out / "Planar-v0.png").exists() and (out / "Planar-v0.md").exists()
+    # Finished runs are reused, not retrained.
+    record = out / "runs" / "pcc_Planar-v0" / "sac_image" / "seed0.json"
+    mtime = record.stat().st_mtime
+    vs_sac.main(["--env", "pcc/Planar-v0", "--steps", "120", "--checkpoints", "60",
+                 "--seeds", "0", "--num-tasks", "1", "--observations", "image",
+                 "--results-dir", str(out), "--reproduce-dir", str(tmp_path / "none")])
+    assert record.stat().st_mtime == mtime
