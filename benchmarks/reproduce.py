@@ -257,12 +257,21 @@ def run_grid(
             records.append(record)
             _report(i + 1, len(todo), record)
         return records
+    failures: list[str] = []
     with ProcessPoolExecutor(max_workers=workers, initializer=_worker_init) as pool:
-        futures = [pool.submit(execute_run, r, results_dir, data_dir) for r in todo]
+        futures = {pool.submit(execute_run, r, results_dir, data_dir): r for r in todo}
         for i, future in enumerate(as_completed(futures)):
-            record = future.result()
+            try:
+                record = future.result()
+            except Exception as error:  # one failed run must not stop or hang the grid
+                spec = futures[future]
+                failures.append(f"{spec.env_id} {spec.method} seed={spec.seed}: {error!r}")
+                print(f"[{i + 1}/{len(todo)}] FAILED {failures[-1]}", flush=True)
+                continue
             records.append(record)
             _report(i + 1, len(todo), record)
+    if failures:
+        raise RuntimeError(f"{len(failures)} run(s) failed:\n" + "\n".join(failures))
     return records
 
 

@@ -122,6 +122,9 @@ def evaluate_control(
     Returns:
         A :class:`ControlEvaluation` with one :class:`TaskResult` per seed.
     """
+    if env_id.startswith("pcc/"):
+        import pcc_envs  # noqa: F401  (registers the pcc/ ids)
+
     results: list[TaskResult] = []
     for seed in seeds:
         env = gym.make(env_id, **(env_kwargs or {}))
