@@ -130,6 +130,16 @@ class EmbeddingModel(nn.Module):
             z.reshape(-1, z.shape[-1]), u.reshape(-1, u.shape[-1]))
         return (a_mat.reshape(*lead, *a_mat.shape[1:]), b_mat.reshape(*lead, *b_mat.shape[1:]))
 
+    @torch.no_grad()
+    def fit_input_statistics(self, obs: torch.Tensor) -> None:
+        """Fit the per-pixel input standardization (if enabled) on uint8 images ``(N, F, H, W)``."""
+        if not self.config.input_standardization:
+            return
+        images = to_float_image(obs)
+        for module in self.modules():
+            if hasattr(module, "set_statistics"):
+                module.set_statistics(images)
+
     def planner_dynamics(self) -> Any:
         """The deterministic latent dynamics as the planner should use them.
 

@@ -80,6 +80,9 @@ class ModelConfig:
         backward_nu: Width N_u of its action path.
         backward_nx: Width N_x of its observation path.
         backward_joint: Width N_joint of the joint layer.
+        input_standardization: Standardize the encoder's and backward model's image input
+            per pixel with statistics of the training images (a fixed preprocessing layer,
+            no learned parameters; not in the paper, see ``docs/training.md``).
         min_logvar: Lower clamp of every predicted log-variance (numerical safety).
         max_logvar: Upper clamp of every predicted log-variance.
     """
@@ -101,6 +104,7 @@ class ModelConfig:
     backward_nu: int = 5
     backward_nx: int = 100
     backward_joint: int = 100
+    input_standardization: bool = False
     min_logvar: float = -12.0
     max_logvar: float = 8.0
 

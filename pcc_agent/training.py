@@ -386,6 +386,8 @@ class Trainer:
             torch.from_numpy(np.ascontiguousarray(arrays.next_obs)).to(self.device),
         )
         train_idx, val_idx = self._split(len(arrays))
+        if not resume:  # a resumed run restores the statistics with the weights
+            self.model.fit_input_statistics(tensors[0][train_idx.to(self.device)])
         result = TrainResult()
         state: dict[str, Any] = {
             "bad_epochs": 0, "best_state_dict": copy.deepcopy(self.model.state_dict())

@@ -30,3 +30,29 @@ def test_e2c_planner_dynamics_use_the_model_heads():
     z, u = torch.randn(4, 2), torch.zeros(4, 2)
     A, _ = model.planner_dynamics().jacobians(z, u)
     torch.testing.assert_close(A, model.linearize(z, u)[0])
+
+
+def test_input_standardization_is_fitted_and_saved(tmp_path):
+    import dataclasses
+
+    import numpy as np
+
+    from pcc_agent.checkpoint import load_model, save_checkpoint
+    from pcc_agent.training import train_embedding
+
+    preset = get_preset("pcc/Planar-v0")
+    config = dataclasses.replace(preset.model, input_standardization=True)
+    model = EmbeddingModel((1, 40, 40), 2, config, seed=0)
+    rng = np.random.default_rng(0)
+    obs = (rng.random((64, 1, 40, 40)) < 0.1).astype(np.uint8) * 255
+    before = model.encoder.backbone[0][0].scale.clone()
+    train_embedding(model, (obs, np.zeros((64, 2), np.float32), obs),
+                    dataclasses.replace(preset.train, epochs=1), progress_bar=False,
+                    device="cpu")
+    scale = model.encoder.backbone[0][0].scale
+    assert not torch.equal(scale, before) and torch.all(scale > 0)
+    path = save_checkpoint(tmp_path / "m.pt", model)
+    loaded, _ = load_model(path)
+    torch.testing.assert_close(loaded.encoder.backbone[0][0].scale, scale)
+    x = torch.as_tensor(obs[:3])
+    torch.testing.assert_close(loaded.encode(x)[0], model.encode(x)[0])
