@@ -126,8 +126,9 @@ class PCCAgent:
         self.num_timesteps = 0
         self.train_result: TrainResult | None = None
         self._logger: Logger | None = None
-        if env is not None:
-            self.set_env(env)
+        if env is None:
+            raise ValueError("PCCAgent needs an environment (a gymnasium env or a registered id).")
+        self.set_env(env)
         assert self.env is not None
         self.env_id = self.env.spec.id if self.env.spec is not None else "custom"
         self.preset = self._resolve_preset(preset)
