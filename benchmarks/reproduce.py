@@ -90,14 +90,22 @@ def _write_json_atomic(path: Path, payload: Any) -> None:
     os.replace(tmp, path)
 
 
-def load_finished_run(path: Path) -> dict[str, Any] | None:
-    """Return a finished run's record, or None if the file is missing, partial or stale."""
+def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any] | None:
+    """Return a finished run's record, or None if the file is missing, partial or stale.
+
+    With ``spec``, a record written for other settings of the same cell (e.g. another
+    ``--num-tasks`` or ``--max-epochs``) is stale too.
+    """
     try:
         with open(path) as handle:
             record = json.load(handle)
     except (OSError, json.JSONDecodeError):
         return None
+    if not isinstance(record, dict):
+        return None
     if record.get("format") != RESULT_FORMAT or record.get("status") != "done":
+        return None
+    if spec is not None and record.get("spec") != asdict(spec):
         return None
     return record
 
@@ -110,7 +118,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     import torch
 
     path = Path(results_dir) / spec.relative_path
-    done = load_finished_run(path)
+    done = load_finished_run(path, spec)
     if done is not None:
         done["skipped"] = True
         return done
@@ -233,7 +241,7 @@ def run_grid(
     data_dir: str | None = None,
 ) -> list[dict[str, Any]]:
     """Execute the runs that are not finished yet, in a process pool or on Ray."""
-    todo = [r for r in runs if load_finished_run(results_dir / r.relative_path) is None]
+    todo = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
     print(f"{len(runs) - len(todo)} of {len(runs)} runs already finished; {len(todo)} to run.")
     if not todo:
         return []

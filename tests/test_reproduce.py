@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -106,3 +107,15 @@ def test_aggregate_all_and_top1():
 
 def test_interquartile_mean():
     assert interquartile_mean(np.array([0, 1, 2, 3, 4, 5, 6, 100])) == 3.5
+
+
+def test_record_of_other_settings_is_stale(tmp_path):
+    spec = tiny_spec()
+    path = tmp_path / spec.relative_path
+    record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": []}
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps(record))
+    assert load_finished_run(path, spec) is not None
+    # Same file path, but --num-tasks / --max-epochs changed: the old record must not count.
+    assert load_finished_run(path, dataclasses.replace(spec, num_tasks=5)) is None
+    assert load_finished_run(path, dataclasses.replace(spec, max_epochs=3)) is None
