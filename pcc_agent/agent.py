@@ -289,7 +289,7 @@ class PCCAgent:
             for key, value in metrics.items():
                 self.logger.record(f"train/{key}", value)
             self.logger.record("train/epoch", epoch)
-            if log_interval and epoch % log_interval == 0 and self.verbose:
+            if log_interval and epoch % log_interval == 0:
                 self.logger.dump(self.num_timesteps)
             if sb3_callback is None:
                 return True

@@ -131,3 +131,16 @@ def test_sb3_callbacks_work_during_learn(tmp_path):
 def test_unknown_method_is_refused():
     with pytest.raises(ValueError, match="Unknown method"):
         PCCAgent(ENV_ID, method="pcx")
+
+
+def test_logger_writes_csv_when_not_verbose(tmp_path):
+    agent = PCCAgent(
+        ENV_ID,
+        preset=tiny_preset(epochs=2),
+        seed=0,
+        data_cache_dir=tmp_path / "data",
+        tensorboard_log=str(tmp_path / "log"),
+    )
+    agent.learn(total_timesteps=200)
+    lines = (tmp_path / "log" / "progress.csv").read_text().splitlines()
+    assert len(lines) == 3 and "train/epoch" in lines[0]
