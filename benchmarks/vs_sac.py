@@ -64,6 +64,26 @@ def make_env(env_id: str, observation: str) -> gym.Env:
     return TrueStateObservation(env) if observation == "state" else env
 
 
+def load_finished_sac_run(
+    path: Path, steps: int, checkpoints: Sequence[int], task_seed_list: Sequence[int]
+) -> dict[str, Any] | None:
+    """A finished run's record, or None if it is missing or stale.
+
+    Stale: made with other steps, checkpoints or task seeds (not the curve asked for).
+    """
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    if (
+        record.get("status") != "done"
+        or record.get("steps") != steps
+        or [p["env_steps"] for p in record.get("curve", [])] != list(checkpoints)
+        or record.get("task_seeds") != list(task_seed_list)
+    ):
+        return None
+    return record
+
+
 def run_sac(
     env_id: str,
     observation: str,
@@ -84,10 +104,10 @@ def run_sac(
     path = (
         results_dir / "runs" / env_id.replace("/", "_") / f"sac_{observation}" / f"seed{seed}.json"
     )
-    if path.exists():
-        record = json.loads(path.read_text())
-        if record.get("status") == "done" and record.get("steps") == steps:
-            return record
+    wanted = sorted({c for c in checkpoints if c <= steps} | {steps})
+    record = load_finished_sac_run(path, steps, wanted, task_seed_list)
+    if record is not None:
+        return record
     policy = "CnnPolicy" if observation == "image" else "MlpPolicy"
     env = make_env(env_id, observation)
     model = SAC(
@@ -100,7 +120,6 @@ def run_sac(
         verbose=0,
     )
     curve: list[dict[str, Any]] = []
-    wanted = sorted({c for c in checkpoints if c <= steps} | {steps})
 
     class EvalAtCheckpoints(BaseCallback):
         def _on_step(self) -> bool:

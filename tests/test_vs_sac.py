@@ -28,3 +28,14 @@ def test_vs_sac_tiny_budget(tmp_path):
                  "--seeds", "0", "--num-tasks", "1", "--observations", "image",
                  "--results-dir", str(out), "--reproduce-dir", str(tmp_path / "none")])
     assert record.stat().st_mtime == mtime
+
+
+def test_finished_sac_run_with_other_tasks_is_not_reused(tmp_path):
+    path = tmp_path / "seed0.json"
+    record = {"status": "done", "steps": 120, "curve": [{"env_steps": 60}, {"env_steps": 120}],
+              "task_seeds": [1, 2]}
+    path.write_text(json.dumps(record))
+    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2]) is not None
+    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2, 3]) is None
+    assert vs_sac.load_finished_sac_run(path, 120, [30, 60, 120], [1, 2]) is None
+    assert vs_sac.load_finished_sac_run(path, 200, [60, 200], [1, 2]) is None
