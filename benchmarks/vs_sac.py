@@ -216,8 +216,15 @@ def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, 
         spec = rec["spec"]
         if spec["env_id"] != env_id or spec["noise_std"] != 0.0:
             continue
+        # One point per (method, preset): "paper" and "paper-fast" runs are different models.
         entry = model_based.setdefault(
-            spec["method"], {"percentages": [], "num_samples": None, "preset": spec["preset"]}
+            f"{spec['method']} ({spec['preset']})",
+            {
+                "method": spec["method"],
+                "percentages": [],
+                "num_samples": None,
+                "preset": spec["preset"],
+            },
         )
         entry["percentages"].extend(rec["percentages"])
         entry["num_samples"] = rec.get("config", {}).get("data", {}).get("num_samples")
@@ -241,10 +248,10 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
         "| method | env samples | % steps in goal (mean ± SE) | n |",
         "|---|---|---|---|",
     ]
-    for method, entry in sorted(summary["model_based"].items()):
-        samples = "- (true dynamics)" if method == ORACLE else entry["num_samples"]
+    for label, entry in sorted(summary["model_based"].items()):
+        samples = "- (true dynamics)" if entry["method"] == ORACLE else entry["num_samples"]
         lines.append(
-            f"| {method} ({entry['preset']}) | {samples} | {entry['mean']:.1f} ± {entry['se']:.1f} "
+            f"| {label} | {samples} | {entry['mean']:.1f} ± {entry['se']:.1f} "
             f"| {entry['n_tasks']} tasks |"
         )
     for policy, curve in sorted(summary["sac"].items()):
@@ -261,8 +268,8 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
         e = np.array([p["se"] for p in curve])
         ax.plot(x, y, marker="o", label=policy.replace("_", " "))
         ax.fill_between(x, y - e, y + e, alpha=0.2)
-    for method, entry in sorted(summary["model_based"].items()):
-        if method == ORACLE:
+    for label, entry in sorted(summary["model_based"].items()):
+        if entry["method"] == ORACLE:
             ax.axhline(entry["mean"], color="k", linestyle="--", label="oracle (true dynamics)")
         elif entry["num_samples"]:
             ax.errorbar(
@@ -271,7 +278,7 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
                 yerr=entry["se"],
                 fmt="s",
                 capsize=3,
-                label=method,
+                label=label,
             )
     ax.set_xscale("log")
     ax.set_xlabel("environment samples")

@@ -39,3 +39,23 @@ def test_finished_sac_run_with_other_tasks_is_not_reused(tmp_path):
     assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2, 3]) is None
     assert vs_sac.load_finished_sac_run(path, 120, [30, 60, 120], [1, 2]) is None
     assert vs_sac.load_finished_sac_run(path, 200, [60, 200], [1, 2]) is None
+
+
+def test_model_based_points_are_per_preset(tmp_path):
+    from benchmarks.reproduce import _write_json_atomic
+
+    for preset, values, n in (("paper", [10.0, 20.0], 5000), ("paper-fast", [80.0], 3000)):
+        _write_json_atomic(
+            tmp_path / "runs" / preset / "pcc.json",
+            {
+                "format": 1,
+                "status": "done",
+                "spec": {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0,
+                         "preset": preset},
+                "percentages": values,
+                "config": {"data": {"num_samples": n}},
+            },
+        )
+    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)["model_based"]
+    assert points["pcc (paper)"]["mean"] == 15.0 and points["pcc (paper)"]["num_samples"] == 5000
+    assert points["pcc (paper-fast)"]["mean"] == 80.0
