@@ -18,6 +18,7 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import os
 from pathlib import Path
 from typing import Any
@@ -208,6 +209,8 @@ class PCCAgent:
             formats = ["stdout"] if self.verbose else []
             if self.tensorboard_log:
                 formats += ["csv"]
+                if importlib.util.find_spec("tensorboard") is not None:
+                    formats += ["tensorboard"]
             self._logger = configure(self.tensorboard_log, formats)
         return self._logger
 
