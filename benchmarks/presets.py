@@ -30,6 +30,18 @@ ALL_METHODS: tuple[str, ...] = (
 )
 
 
+#: The task start distribution of every env (its ``reset`` without options), for the tables.
+TASK_STARTS: dict[str, str] = {
+    "pcc/Planar-v0": "corner (3,3), (3,37) or (37,3) + U(-0.5, 0.5)^2",
+    "pcc/PendulumSwingUp-v0": "hanging at rest (pi, 0)",
+    "pcc/PendulumBalance-v0": "angle U(-pi/6, pi/6), at rest",
+    "pcc/CartPole-v0": "pole angle U(-pi/6, pi/6), rest 0",
+    "pcc/TwoLink-v0": "(pi, pi/2) at rest",
+    "pcc/ThreeLink-v0": "(pi, 2pi/3, pi/3) at rest",
+    "pcc/LaneKeeping-v0": "20 forced full-left or full-right steps from the centre",
+}
+
+
 @dataclass(frozen=True)
 class ReproducePreset:
     """A grid of the reproducible pipeline (paper Section 6: N models x M tasks).

@@ -355,6 +355,7 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
             "n_models": len(recs),
             "n_tasks": int(np.median([m.size for m in per_model])),
             "seeds": [r["spec"]["seed"] for r in recs],
+            "task_seed": recs[0]["spec"]["task_seed"],
             "mean_all": float(all_tasks.mean()),
             "se_all": se(all_tasks),
             "mean_top1": float(top.mean()),
@@ -400,23 +401,29 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
 
 def settings_table(rows: list[dict[str, Any]]) -> str:
     """The evaluation settings of every (env, preset): printed beside the results."""
+    from benchmarks.presets import TASK_STARTS
+
     seen: dict[tuple[str, str], dict[str, Any]] = {}
     for r in rows:
         if r["method"] != ORACLE and (r["env"], r["preset"]) not in seen:
-            seen[(r["env"], r["preset"])] = r["settings"]
+            seen[(r["env"], r["preset"])] = r
     lines = [
         "| env | preset | episode length | plan length | iLQR iters (first / MPC) "
-        "| candidates | kappa (Q = kappa I) | R | action bounds | data size |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| candidates | kappa (Q = kappa I) | R | action bounds | data size "
+        "| tasks per model (task seed) | model seeds | task starts |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for (env, preset), s in seen.items():
+    for (env, preset), row in seen.items():
+        s = row["settings"]
         p = s.get("planner", {})
         lines.append(
             f"| {env} | {preset} | {s.get('episode_length', '-')} | {p.get('plan_length')} "
             f"| {p.get('iterations')} / {p.get('mpc_iterations')} | {p.get('num_candidates')} "
             f"| {p.get('kappa')} | {p.get('r_weight')} I "
             f"| [{p.get('action_low')}, {p.get('action_high')}] "
-            f"| {s.get('data', {}).get('num_samples')} |"
+            f"| {s.get('data', {}).get('num_samples')} "
+            f"| {row['n_tasks']} ({row.get('task_seed', '-')}) | {row['seeds']} "
+            f"| {TASK_STARTS.get(env, '-')} |"
         )
     return "\n".join(lines) + "\n"
 
