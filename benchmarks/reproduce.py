@@ -355,7 +355,7 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
             "n_models": len(recs),
             "n_tasks": int(np.median([m.size for m in per_model])),
             "seeds": [r["spec"]["seed"] for r in recs],
-            "task_seed": recs[0]["spec"]["task_seed"],
+            "task_seed": recs[0]["spec"].get("task_seed"),
             "mean_all": float(all_tasks.mean()),
             "se_all": se(all_tasks),
             "mean_top1": float(top.mean()),
