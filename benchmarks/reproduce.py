@@ -90,6 +90,11 @@ def _write_json_atomic(path: Path, payload: Any) -> None:
     os.replace(tmp, path)
 
 
+def checkpoint_path(results_dir: str | Path, spec: RunSpec) -> Path:
+    """Where a run's trained agent is saved (``PCCAgent.load`` reads it back)."""
+    return Path(results_dir) / "checkpoints" / spec.relative_path.with_suffix(".pt")
+
+
 def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any] | None:
     """Return a finished run's record, or None if the file is missing, partial or stale.
 
@@ -164,6 +169,8 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         )
         agent.learn(progress_bar=False)
         record["train_seconds"] = time.perf_counter() - start
+        # The trained agent, for re-evaluation with other planner settings (not committed).
+        agent.save(checkpoint_path(results_dir, spec))
         record["config"] = agent.config_dict()
         record["training"] = agent.train_summary()
         evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
