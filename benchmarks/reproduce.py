@@ -112,7 +112,27 @@ def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any]
         return None
     if spec is not None and record.get("spec") != asdict(spec):
         return None
+    if spec is not None and spec.method != ORACLE and not _same_planner(record, spec):
+        return None
     return record
+
+
+def _preset_for(spec: RunSpec) -> Any:
+    """The env preset of a run, with the run's overrides applied."""
+    from pcc_agent.presets import get_preset
+
+    preset = get_preset(spec.env_id, spec.model_variant)
+    if spec.max_epochs is not None:
+        preset = replace(preset, train=replace(preset.train, epochs=spec.max_epochs))
+    if spec.num_samples is not None:
+        preset = replace(preset, data=replace(preset.data, num_samples=spec.num_samples))
+    return preset
+
+
+def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
+    """Whether a record was evaluated with the planner settings the preset has now."""
+    wanted = json.loads(json.dumps(asdict(_preset_for(spec).planner)))
+    return record.get("config", {}).get("planner") == wanted
 
 
 def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = None) -> dict:
@@ -133,6 +153,13 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
 
     env_kwargs = {"noise_std": spec.noise_std} if spec.noise_std else {}
     seeds = task_seeds(spec.task_seed, spec.num_tasks)
+    trained = load_finished_run(path)
+    if (
+        trained is not None
+        and trained.get("spec") == asdict(spec)
+        and checkpoint_path(results_dir, spec).exists()
+    ):
+        return _reevaluate(trained, spec, Path(results_dir), seeds, env_kwargs)
     record: dict[str, Any] = {
         "format": RESULT_FORMAT,
         "spec": asdict(spec),
@@ -152,13 +179,8 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         )
     else:
         from pcc_agent.agent import PCCAgent
-        from pcc_agent.presets import get_preset
 
-        preset = get_preset(spec.env_id, spec.model_variant)
-        if spec.max_epochs is not None:
-            preset = replace(preset, train=replace(preset.train, epochs=spec.max_epochs))
-        if spec.num_samples is not None:
-            preset = replace(preset, data=replace(preset.data, num_samples=spec.num_samples))
+        preset = _preset_for(spec)
         agent = PCCAgent(
             spec.env_id,
             method=spec.method,
@@ -182,6 +204,37 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     record["mean"] = evaluation.mean
     record["status"] = "done"
     _write_json_atomic(path, record)
+    return record
+
+
+def _reevaluate(
+    record: dict[str, Any], spec: RunSpec, results_dir: Path, seeds: list[int],
+    env_kwargs: dict[str, Any],
+) -> dict[str, Any]:
+    """Run the control tasks again with the preset's current planner, from the saved agent.
+
+    Used when the planner settings of a preset changed after a model was trained: the model
+    is not retrained; its record keeps the training information and gets the new control
+    results, the new planner settings and ``reevaluated: true``.
+    """
+    from pcc_agent.agent import PCCAgent
+    from pcc_agent.evaluation import evaluate_control
+
+    agent = PCCAgent.load(checkpoint_path(results_dir, spec))
+    planner = _preset_for(spec).planner
+    agent.preset = replace(agent.preset, planner=planner)
+    start = time.perf_counter()
+    evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
+    record = dict(record)
+    record["config"] = {**record.get("config", {}), "planner": asdict(planner)}
+    record["previous_planner_results"] = record.get("percentages")
+    record["eval_seconds"] = time.perf_counter() - start
+    record["percentages"] = [t.percent_in_goal for t in evaluation.tasks]
+    record["tasks"] = [t.to_dict() for t in evaluation.tasks]
+    record["mean"] = evaluation.mean
+    record["reevaluated"] = True
+    record["command"] = " ".join(sys.argv)
+    _write_json_atomic(results_dir / spec.relative_path, record)
     return record
 
 
@@ -440,8 +493,14 @@ def load_records(results_dir: Path) -> list[dict[str, Any]]:
     records = []
     for path in sorted((results_dir / "runs").rglob("*.json")):
         rec = load_finished_run(path)
-        if rec is not None:
-            records.append(rec)
+        if rec is None:
+            continue
+        spec = RunSpec(**rec["spec"])
+        if spec.method != ORACLE and not _same_planner(rec, spec):
+            print(f"Not aggregated (evaluated with other planner settings than the preset's; "
+                  f"re-run the grid to re-evaluate or retrain it): {path}")
+            continue
+        records.append(rec)
     return records
 
 

@@ -112,10 +112,29 @@ def test_interquartile_mean():
 def test_record_of_other_settings_is_stale(tmp_path):
     spec = tiny_spec()
     path = tmp_path / spec.relative_path
-    record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": []}
+    from pcc_agent.presets import get_preset
+
+    planner = json.loads(json.dumps(dataclasses.asdict(get_preset(spec.env_id).planner)))
+    record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": [],
+              "config": {"planner": planner}}
     path.parent.mkdir(parents=True)
     path.write_text(json.dumps(record))
     assert load_finished_run(path, spec) is not None
     # Same file path, but --num-tasks / --max-epochs changed: the old record must not count.
     assert load_finished_run(path, dataclasses.replace(spec, num_tasks=5)) is None
     assert load_finished_run(path, dataclasses.replace(spec, max_epochs=3)) is None
+
+
+def test_run_with_old_planner_settings_is_reevaluated_not_retrained(tmp_path):
+    spec = tiny_spec(seed=1)
+    first = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    path = tmp_path / spec.relative_path
+    record = json.loads(path.read_text())
+    record["config"]["planner"]["plan_length"] = 3  # as if the preset's planner had changed
+    path.write_text(json.dumps(record))
+    assert load_finished_run(path, spec) is None
+    again = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    assert again["reevaluated"] is True
+    assert again["train_seconds"] == first["train_seconds"]
+    assert again["config"]["planner"]["plan_length"] == first["config"]["planner"]["plan_length"]
+    assert load_finished_run(path, spec) is not None
