@@ -367,7 +367,8 @@ _LANE_MODEL = _paper_cnn_model(8, 32, 200, (200,), 300)
 _PLANNERS = {
     # Planar: the paper's T = 40 (the whole episode). Measured on a trained PCC model (seed 1,
     # 10 tasks, benchmarks/results/planner_sweep_planar_pcc_seed1.json): 36.5% in goal with a
-    # 40-step window against 20.5% with 10 steps.
+    # 40-step window against 20.5% with 10 steps (an E2C model preferred 10: 43.5% vs 21.2%,
+    # benchmarks/results/planner_sweep_planar_e2c_seed1.json; the paper's value is kept).
     "pcc/Planar-v0": PlannerConfig(plan_length=40, kappa=1.0, r_weight=0.1, iterations=4),
     "pcc/PendulumSwingUp-v0": PlannerConfig(plan_length=10, kappa=1.0, r_weight=0.1),
     "pcc/PendulumBalance-v0": PlannerConfig(plan_length=10, kappa=1.0, r_weight=0.1),
