@@ -495,7 +495,11 @@ def load_records(results_dir: Path) -> list[dict[str, Any]]:
         rec = load_finished_run(path)
         if rec is None:
             continue
-        spec = RunSpec(**rec["spec"])
+        try:
+            spec = RunSpec(**rec["spec"])
+        except TypeError:  # a hand-made or older record without a full spec: no check
+            records.append(rec)
+            continue
         if spec.method != ORACLE and not _same_planner(rec, spec):
             print(f"Not aggregated (evaluated with other planner settings than the preset's; "
                   f"re-run the grid to re-evaluate or retrain it): {path}")
