@@ -93,7 +93,7 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
     substeps: ClassVar[int] = 1
     #: Whether :meth:`transition` accepts batches and is cheap (used by the oracle planner).
     supports_oracle: ClassVar[bool] = True
-    #: Frames per second advertised for videos.
+    #: Upscaling factor of ``render_rgb`` (``render_mode="rgb_array"``) over one frame.
     render_scale: ClassVar[int] = 6
 
     def __init__(
