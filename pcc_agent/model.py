@@ -132,13 +132,21 @@ class EmbeddingModel(nn.Module):
 
     @torch.no_grad()
     def fit_input_statistics(self, obs: torch.Tensor) -> None:
-        """Fit the per-pixel input standardization (if enabled) on uint8 images ``(N, F, H, W)``."""
-        if not self.config.input_standardization:
+        """Fit the data-dependent parts on training images ``(N, F, H, W)`` (uint8).
+
+        The per-pixel input standardization (``config.input_standardization``) and the
+        decoder's output-bias initialization (``config.decoder_bias_init``); a no-op when both
+        are off (the paper's setting).
+        """
+        if not (self.config.input_standardization or self.config.decoder_bias_init):
             return
         images = to_float_image(obs)
-        for module in self.modules():
-            if hasattr(module, "set_statistics"):
-                module.set_statistics(images)
+        if self.config.input_standardization:
+            for module in self.modules():
+                if hasattr(module, "set_statistics"):
+                    module.set_statistics(images)
+        if self.config.decoder_bias_init:
+            self.decoder.init_output_bias(images)
 
     def planner_dynamics(self) -> Any:
         """The deterministic latent dynamics as the planner should use them.

@@ -178,6 +178,19 @@ class BernoulliDecoder(nn.Module):
         self.convs = nn.Sequential(*layers)
         self.output_upsample = config.decoder_output_upsample
 
+    @torch.no_grad()
+    def init_output_bias(self, images: torch.Tensor, eps: float = 1e-3) -> None:
+        """Set the output biases to the logits of the mean of float images ``(N, F, H, W)``.
+
+        The MLP decoder gets one bias per pixel (the mean image); the CNN decoder, whose last
+        convolution has one bias per frame, gets the logit of each frame's mean intensity.
+        """
+        mean = images.mean(0).clamp(eps, 1.0 - eps)
+        if self.kind == "mlp":
+            self.net[-1].bias.copy_(torch.logit(mean).reshape(-1))
+        else:
+            self.convs[-1].bias.copy_(torch.logit(mean.mean(dim=(1, 2))))
+
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         """Return the Bernoulli logits of D(x | z), shaped ``(B, F, H, W)``."""
         if self.kind == "mlp":

@@ -472,7 +472,8 @@ class Trainer:
                         result.message = (
                             f"Stopped by the epoch callback after epoch {result.epochs}.")
                         break
-                if self.config.patience > 0 and state["bad_epochs"] >= self.config.patience:
+                if (self.config.patience > 0 and state["bad_epochs"] >= self.config.patience
+                        and result.epochs >= self.config.min_epochs):
                     result.converged = True
                     result.message = (
                         f"Early stopping: no validation improvement for {self.config.patience} "

@@ -296,3 +296,28 @@ def test_rollout_and_plan_shapes_float32() -> None:
 def test_shift_plan_repeats_last_action() -> None:
     u = torch.arange(6.0).view(1, 3, 2)
     assert shift_plan(u).tolist() == [[[2.0, 3.0], [4.0, 5.0], [4.0, 5.0]]]
+
+
+class _TorchOnly:
+    """The same dynamics without ``step_numpy``: forces the planner's torch loops."""
+
+    def __init__(self, dynamics: MLPDynamics) -> None:
+        self.step, self.jacobians = dynamics.step, dynamics.jacobians
+
+
+@pytest.mark.parametrize("activation", ["relu", "tanh"])
+def test_numpy_fast_path_matches_torch_loops(activation: str) -> None:
+    dynamics = MLPDynamics.random(4, 2, (20, 20), torch.Generator().manual_seed(7),
+                                  activation=activation, residual=True, dtype=DTYPE)
+    z0 = torch.randn(3, 4, dtype=DTYPE, generator=torch.Generator().manual_seed(8))
+    u = torch.rand(3, 12, 2, dtype=DTYPE, generator=torch.Generator().manual_seed(9)) * 2 - 1
+    np.testing.assert_allclose(dynamics.step_numpy(z0.numpy(), u[:, 0].numpy()),
+                               dynamics.step(z0, u[:, 0]).numpy(), rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(rollout(dynamics, z0, u), rollout(_TorchOnly(dynamics), z0, u))
+    config = PlannerConfig(plan_length=12, iterations=4, action_low=-0.5, action_high=0.5)
+    cost = QuadraticCost.from_config(config, torch.ones(4, dtype=DTYPE), 2)
+    fast = ilqr_solve(dynamics, cost, z0, u, config)
+    slow = ilqr_solve(_TorchOnly(dynamics), cost, z0, u, config)
+    torch.testing.assert_close(fast.u, slow.u, atol=1e-10, rtol=1e-10)
+    torch.testing.assert_close(fast.cost, slow.cost)
+    assert torch.equal(fast.status, slow.status)

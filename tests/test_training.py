@@ -204,3 +204,22 @@ def test_epoch_callback_receives_metrics_and_can_stop():
     assert "callback" in result.message
     summary = result.summary()
     assert json.loads(json.dumps(summary))["epochs"] == 2 and "history" not in summary
+
+
+@pytest.mark.parametrize("min_epochs, expected", [(0, 2), (5, 5)])
+def test_early_stopping_waits_for_min_epochs(min_epochs, expected):
+    # lr = 0: the validation loss never improves after epoch 1, so patience 1 stops at epoch 2
+    # unless min_epochs holds training on the plateau.
+    config = dataclasses.replace(TRAIN, epochs=8, lr=0.0, patience=1, min_epochs=min_epochs)
+    _, result = _train(planar_like(96), config=config)
+    assert result.converged and result.epochs == expected
+
+
+def test_decoder_bias_init_starts_from_the_mean_image():
+    obs, action, next_obs = planar_like(64)
+    config = dataclasses.replace(CONFIG, decoder_bias_init=True)
+    model = EmbeddingModel((1, SIZE, SIZE), 2, config, seed=0)
+    model.fit_input_statistics(torch.from_numpy(obs))
+    mean = np.clip(obs.astype(np.float64).mean(0) / 255.0, 1e-3, 1 - 1e-3)
+    bias = model.decoder.net[-1].bias.detach().numpy().reshape(mean.shape)
+    np.testing.assert_allclose(bias, np.log(mean / (1 - mean)), atol=1e-4)

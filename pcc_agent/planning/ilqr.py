@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -117,10 +118,24 @@ def rollout(dynamics: LatentDynamics, z0: Tensor, u: Tensor) -> Tensor:
     Returns:
         States ``(B, T + 1, nz)``, starting with ``z0``.
     """
+    step_numpy = _numpy_step(dynamics, z0)
+    if step_numpy is not None:
+        z_np, u_np = _to_numpy(z0), _to_numpy(u)
+        states_np = [z_np]
+        for t in range(u_np.shape[1]):
+            states_np.append(step_numpy(states_np[-1], u_np[:, t]))
+        return torch.from_numpy(np.stack(states_np, 1)).to(z0)
     states = [z0]
     for u_t in u.unbind(1):
         states.append(dynamics.step(states[-1], u_t))
     return torch.stack(states, 1)
+
+
+def _numpy_step(dynamics: LatentDynamics, z: Tensor) -> Any:
+    """``dynamics.step_numpy`` when the dynamics offer it and ``z`` lives on the CPU."""
+    if z.device.type != "cpu":
+        return None
+    return getattr(dynamics, "step_numpy", None)
 
 
 def linearize(dynamics: LatentDynamics, z: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
@@ -362,19 +377,47 @@ def line_search(
     c = (c.unsqueeze(1) + alphas.view(1, n_a, 1, 1) * k.unsqueeze(1)).reshape(n, horizon, nu, 1)
     K_all = K.unsqueeze(1).expand(n_b, n_a, horizon, nu, nz).reshape(n, horizon, nu, nz)
     z_t = z[:, 0].repeat_interleave(n_a, 0)
-    states, actions = [z_t], []
-    for c_t, K_t in zip(c.unbind(1), K_all.unbind(1)):
-        u_t = torch.baddbmm(c_t, K_t, z_t.unsqueeze(-1)).squeeze_(-1)
-        u_t = u_t.clamp_(action_low, action_high)
-        z_t = dynamics.step(z_t, u_t)
-        states.append(z_t)
-        actions.append(u_t)
-    z_new = torch.stack(states, 1)
-    u_new = torch.stack(actions, 1)
+    step_numpy = _numpy_step(dynamics, z)
+    if step_numpy is not None:
+        z_new, u_new = _closed_loop_numpy(step_numpy, _to_numpy(z_t), _to_numpy(c[..., 0]),
+                                          _to_numpy(K_all), action_low, action_high)
+        z_new, u_new = torch.from_numpy(z_new).to(z), torch.from_numpy(u_new).to(z)
+    else:
+        states, actions = [z_t], []
+        for c_t, K_t in zip(c.unbind(1), K_all.unbind(1)):
+            u_t = torch.baddbmm(c_t, K_t, z_t.unsqueeze(-1)).squeeze_(-1)
+            u_t = u_t.clamp_(action_low, action_high)
+            z_t = dynamics.step(z_t, u_t)
+            states.append(z_t)
+            actions.append(u_t)
+        z_new = torch.stack(states, 1)
+        u_new = torch.stack(actions, 1)
     costs = _finite_cost(cost, z_new, u_new, repeats=n_a).view(n_b, n_a)
     best_cost, best = costs.min(1)
     index = torch.arange(n_b, device=z.device) * n_a + best.to(z.device)
     return z_new[index], u_new[index], best_cost
+
+
+def _closed_loop_numpy(
+    step_numpy: Any, z0: np.ndarray, c: np.ndarray, K: np.ndarray, low: float, high: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rollout of ``u_t = clip(c_t + K_t z_t)`` in float64 numpy (the line search's loop).
+
+    Shapes: ``z0`` ``(N, nz)``, ``c`` ``(N, T, nu)``, ``K`` ``(N, T, nu, nz)``; returns the
+    states ``(N, T + 1, nz)`` and actions ``(N, T, nu)``.
+    """
+    n, horizon, nu = c.shape
+    states = np.empty((n, horizon + 1, z0.shape[1]))
+    actions = np.empty((n, horizon, nu))
+    states[:, 0] = z_t = z0
+    with np.errstate(all="ignore"):  # a diverging candidate becomes inf/NaN, rejected later
+        for t in range(horizon):
+            u_t = np.einsum("nij,nj->ni", K[:, t], z_t) + c[:, t]
+            np.clip(u_t, low, high, out=u_t)
+            z_t = step_numpy(z_t, u_t)
+            actions[:, t] = u_t
+            states[:, t + 1] = z_t
+    return states, actions
 
 
 def _finite_cost(cost: QuadraticCost, z: Tensor, u: Tensor, repeats: int = 1) -> Tensor:
