@@ -299,20 +299,18 @@ def test_shift_plan_repeats_last_action() -> None:
 
 
 class _TorchOnly:
-    """The same dynamics without ``step_numpy``: forces the planner's torch loops."""
+    """The same dynamics without ``packed_mlp``: forces the planner's torch loops."""
 
     def __init__(self, dynamics: MLPDynamics) -> None:
         self.step, self.jacobians = dynamics.step, dynamics.jacobians
 
 
 @pytest.mark.parametrize("activation", ["relu", "tanh"])
-def test_numpy_fast_path_matches_torch_loops(activation: str) -> None:
+def test_compiled_loops_match_torch_loops(activation: str) -> None:
     dynamics = MLPDynamics.random(4, 2, (20, 20), torch.Generator().manual_seed(7),
                                   activation=activation, residual=True, dtype=DTYPE)
     z0 = torch.randn(3, 4, dtype=DTYPE, generator=torch.Generator().manual_seed(8))
     u = torch.rand(3, 12, 2, dtype=DTYPE, generator=torch.Generator().manual_seed(9)) * 2 - 1
-    np.testing.assert_allclose(dynamics.step_numpy(z0.numpy(), u[:, 0].numpy()),
-                               dynamics.step(z0, u[:, 0]).numpy(), rtol=1e-12, atol=1e-12)
     torch.testing.assert_close(rollout(dynamics, z0, u), rollout(_TorchOnly(dynamics), z0, u))
     config = PlannerConfig(plan_length=12, iterations=4, action_low=-0.5, action_high=0.5)
     cost = QuadraticCost.from_config(config, torch.ones(4, dtype=DTYPE), 2)
@@ -321,3 +319,31 @@ def test_numpy_fast_path_matches_torch_loops(activation: str) -> None:
     torch.testing.assert_close(fast.u, slow.u, atol=1e-10, rtol=1e-10)
     torch.testing.assert_close(fast.cost, slow.cost)
     assert torch.equal(fast.status, slow.status)
+
+
+def test_compiled_one_action_riccati_matches_numpy_recursion() -> None:
+    from pcc_agent.planning.ilqr import _backward_pass_numpy, backward_pass
+
+    rng = np.random.default_rng(0)
+    n_b, horizon, nz = 5, 9, 4
+    A = np.eye(nz) + 0.3 * rng.standard_normal((n_b, horizon, nz, nz))
+    B = rng.standard_normal((n_b, horizon, nz, 1))
+    l_z = 3.0 * rng.standard_normal((n_b, horizon + 1, nz))
+    l_u = rng.standard_normal((n_b, horizon, 1))
+    l_zz, l_uu = 2.0 * np.eye(nz), np.array([[0.2]])
+    u = rng.uniform(-1, 1, (n_b, horizon, 1))
+    mu = np.array([0.0, 1e-6, 1.0, 0.0, 0.0])
+    l_uu_negative = np.array([[-50.0]])  # Q_uu + mu < 0 somewhere: the pass must fail
+    for cost_uu in (l_uu, l_uu_negative):
+        fast = backward_pass(A, B, l_z, l_u, l_zz, cost_uu, l_zz, u, mu, -0.5, 0.5)
+        if cost_uu is l_uu:  # both clamped (K = 0) and free steps are exercised
+            assert fast.ok.all() and 0 < (fast.K == 0).all(-1).sum() < n_b * horizon
+        k, K, decrease, ok = _backward_pass_numpy(A, B, l_z, l_u, l_zz, cost_uu, l_zz, u, mu,
+                                                  -0.5, 0.5)
+        np.testing.assert_array_equal(fast.ok, ok)
+        good = ok
+        np.testing.assert_allclose(fast.k[good], k[good], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(fast.K[good], K[good], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(fast.expected_decrease[good], decrease[good], rtol=1e-9)
+    assert (fast.k >= -0.5 - u).all() and (fast.k <= 0.5 - u).all()
+    assert not ok.all()  # the negative action cost made some problems fail

@@ -7,9 +7,10 @@ batch: problems x time steps, or problems x line-search step sizes):
 * ``jacobians(z, u) -> (A, B)`` with ``A = d z_next / d z`` ``(N, nz, nz)`` and
   ``B = d z_next / d u`` ``(N, nz, nu)``.
 
-A dynamics object may also offer ``step_numpy(z, u)`` on float64 numpy arrays: the planner's
-sequential rollouts then run in numpy on the CPU, where one tiny matrix product costs about
-a microsecond against several for a torch call (a 200-step plan is 200 dependent steps).
+A dynamics object may also carry ``packed_mlp`` (a
+:class:`~pcc_agent.planning.kernels.PackedMLP`, as :class:`MLPDynamics` does): the planner's
+sequential rollouts then run as compiled loops on the CPU instead of one torch call per
+tiny matrix product (a 200-step plan is 200 dependent steps).
 
 :class:`LatentDynamics` is that protocol. :func:`as_dynamics` wraps whatever is given: an object
 that already follows the protocol, a learned model exposing ``transition_mean(z, u)`` and
@@ -26,6 +27,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 import torch
 from torch import Tensor
+
+from pcc_agent.planning.kernels import RELU, TANH, pack_mlp
 
 
 @runtime_checkable
@@ -126,7 +129,7 @@ def _float64_numpy(t: Tensor) -> np.ndarray:
     return t.detach().to(device="cpu", dtype=torch.float64).numpy()
 
 
-_NUMPY_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "relu": lambda a: np.maximum(a, 0.0, out=a),
     "tanh": lambda a: np.tanh(a, out=a),
 }
@@ -180,10 +183,10 @@ class MLPDynamics:
         self._w_t = [w.T.contiguous() for w in self.weights[1:]]
         self.activation = activation
         self.residual = residual
-        # float64 copies for step_numpy: first layer split as above, then (W^T, b) per layer
-        self._np_first = tuple(_float64_numpy(t) for t in (self._w_z, self._w_u, self.biases[0]))
-        self._np_rest = [(_float64_numpy(w), _float64_numpy(b))
-                         for w, b in zip(self._w_t, self.biases[1:])]
+        #: float64 copy for the planner's compiled CPU loops (:mod:`pcc_agent.planning.kernels`)
+        self.packed_mlp = pack_mlp([_float64_numpy(w) for w in self.weights],
+                                   [_float64_numpy(b) for b in self.biases],
+                                   RELU if activation == "relu" else TANH, residual)
 
     @classmethod
     def random(
@@ -226,18 +229,6 @@ class MLPDynamics:
         x = torch.addmm(self.biases[0], z, self._w_z).addmm_(u, self._w_u)
         for w_t, b in zip(self._w_t, self.biases[1:]):
             x = torch.addmm(b, act(x), w_t)
-        return x + z if self.residual else x
-
-    def step_numpy(self, z: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """:meth:`step` on float64 numpy arrays ``(N, nz)``, ``(N, nu)`` (CPU fast path)."""
-        act = _NUMPY_ACTIVATIONS[self.activation]
-        w_z, w_u, b0 = self._np_first
-        x = z @ w_z
-        x += u @ w_u
-        x += b0
-        for w_t, b in self._np_rest:
-            x = act(x) @ w_t
-            x += b
         return x + z if self.residual else x
 
     def jacobians(self, z: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import torch
@@ -55,6 +54,7 @@ from torch import Tensor
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.dynamics import LatentDynamics
+from pcc_agent.planning.kernels import PackedMLP, closed_loop_rollout, riccati_one_action
 
 
 class Status(enum.IntEnum):
@@ -118,24 +118,24 @@ def rollout(dynamics: LatentDynamics, z0: Tensor, u: Tensor) -> Tensor:
     Returns:
         States ``(B, T + 1, nz)``, starting with ``z0``.
     """
-    step_numpy = _numpy_step(dynamics, z0)
-    if step_numpy is not None:
-        z_np, u_np = _to_numpy(z0), _to_numpy(u)
-        states_np = [z_np]
-        for t in range(u_np.shape[1]):
-            states_np.append(step_numpy(states_np[-1], u_np[:, t]))
-        return torch.from_numpy(np.stack(states_np, 1)).to(z0)
+    mlp = _compiled_mlp(dynamics, z0)
+    if mlp is not None:
+        n_b, horizon, nu = u.shape
+        no_feedback = np.zeros((n_b, horizon, nu, z0.shape[-1]))
+        states, _ = closed_loop_rollout(mlp, _to_numpy(z0), _to_numpy(u), no_feedback,
+                                        -np.inf, np.inf)
+        return torch.from_numpy(states).to(z0)
     states = [z0]
     for u_t in u.unbind(1):
         states.append(dynamics.step(states[-1], u_t))
     return torch.stack(states, 1)
 
 
-def _numpy_step(dynamics: LatentDynamics, z: Tensor) -> Any:
-    """``dynamics.step_numpy`` when the dynamics offer it and ``z`` lives on the CPU."""
+def _compiled_mlp(dynamics: LatentDynamics, z: Tensor) -> PackedMLP | None:
+    """The dynamics' ``packed_mlp`` when it has one and ``z`` is on the CPU, else None."""
     if z.device.type != "cpu":
         return None
-    return getattr(dynamics, "step_numpy", None)
+    return getattr(dynamics, "packed_mlp", None)
 
 
 def linearize(dynamics: LatentDynamics, z: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
@@ -250,6 +250,37 @@ def backward_pass(
         Gains, predicted decrease, and which problems had a positive definite ``Q_uu + mu I``
         everywhere. Gains of problems that did not are meaningless (but finite).
     """
+    if B.shape[-1] == 1:  # compiled scalar recursion: no linear algebra calls per step
+        k, K, decrease, ok = riccati_one_action(
+            A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, action_low - u, action_high - u, mu)
+    else:
+        k, K, decrease, ok = _backward_pass_numpy(
+            A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, u, mu, action_low, action_high)
+    finite = np.isfinite(k).all((1, 2)) & np.isfinite(K).all((1, 2, 3)) & np.isfinite(decrease)
+    ok &= finite
+    k[~finite] = 0.0
+    K[~finite] = 0.0
+    decrease[~finite] = 0.0
+    return BackwardPassResult(k, K, decrease, ok)
+
+
+def _backward_pass_numpy(
+    A: np.ndarray,
+    B: np.ndarray,
+    l_z: np.ndarray,
+    l_u: np.ndarray,
+    l_zz: np.ndarray,
+    l_uu: np.ndarray,
+    l_zz_terminal: np.ndarray,
+    u: np.ndarray,
+    mu: np.ndarray,
+    action_low: float,
+    action_high: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`backward_pass` for any number of actions, as batched numpy operations.
+
+    Returns ``k, K, expected_decrease, ok`` before the finiteness check.
+    """
     n_b, horizon, nz, nu = B.shape
     nx = nz + nu
     G = np.zeros((n_b, horizon, nz + 1, nx + 1))
@@ -281,50 +312,33 @@ def backward_pass(
         Q = G_T[:, t] @ W @ G[:, t] + L[:, t]
         Q_uz, Q_uu, Q_u = Q[:, nz:nx, :nz], Q[:, nz:nx, nz:nx], Q[:, nz:nx, nx]
         lower, upper = lower_all[:, t], upper_all[:, t]
-        if nu == 1:
-            h = Q_uu[:, 0, 0] + mu
-            good = h > 0
-            if not good.all():
-                ok &= good
-                h = np.where(good, h, 1.0)
-            k_free = -Q_u[:, 0] / h
-            k_t = np.minimum(np.maximum(k_free, lower[:, 0]), upper[:, 0])
-            P[:, t, nz, nz] = k_t
-            P[:, t, nz, :nz] = Q_uz[:, 0] * ((k_t == k_free) / -h)[:, None]
-        else:
-            H = Q_uu + mu[:, None, None] * eye_u
-            try:
-                np.linalg.cholesky(H)
-            except np.linalg.LinAlgError:
-                H, good = _positive_definite_or_identity(H)
-                ok &= good
-            try:
-                gains = -np.linalg.solve(H, Q[:, nz:nx][..., gain_columns])
-            except np.linalg.LinAlgError:
-                # Positive definite in floating point yet numerically singular (e.g. huge
-                # finite-difference Jacobians): such problems count as a failed pass.
-                H, good = _positive_definite_or_identity(H)
-                ok &= good
-                gains = -np.linalg.solve(H, Q[:, nz:nx][..., gain_columns])
-            k_t, K_t = gains[..., nz], gains[..., :nz]
-            if ((k_t < lower) | (k_t > upper)).any():
-                k_t, free = box_qp(H, Q_u, lower, upper, k_t)
-                both_free = free[:, :, None] & free[:, None, :]
-                H_free = np.where(both_free, H, eye_u)
-                K_t = -np.linalg.solve(H_free, Q_uz * free[:, :, None])
-            P[:, t, nz:nx, :nz] = K_t
-            P[:, t, nz:nx, nz] = k_t
+        H = Q_uu + mu[:, None, None] * eye_u
+        try:
+            np.linalg.cholesky(H)
+        except np.linalg.LinAlgError:
+            H, good = _positive_definite_or_identity(H)
+            ok &= good
+        try:
+            gains = -np.linalg.solve(H, Q[:, nz:nx][..., gain_columns])
+        except np.linalg.LinAlgError:
+            # Positive definite in floating point yet numerically singular (e.g. huge
+            # finite-difference Jacobians): such problems count as a failed pass.
+            H, good = _positive_definite_or_identity(H)
+            ok &= good
+            gains = -np.linalg.solve(H, Q[:, nz:nx][..., gain_columns])
+        k_t, K_t = gains[..., nz], gains[..., :nz]
+        if ((k_t < lower) | (k_t > upper)).any():
+            k_t, free = box_qp(H, Q_u, lower, upper, k_t)
+            both_free = free[:, :, None] & free[:, None, :]
+            H_free = np.where(both_free, H, eye_u)
+            K_t = -np.linalg.solve(H_free, Q_uz * free[:, :, None])
+        P[:, t, nz:nx, :nz] = K_t
+        P[:, t, nz:nx, nz] = k_t
         W = P_T[:, t] @ Q @ P[:, t]
         W = 0.5 * (W + np.swapaxes(W, -1, -2))
     k = np.ascontiguousarray(P[..., nz:nx, nz])
     K = np.ascontiguousarray(P[..., nz:nx, :nz])
-    decrease = -0.5 * W[:, nz, nz]
-    finite = np.isfinite(k).all((1, 2)) & np.isfinite(K).all((1, 2, 3)) & np.isfinite(decrease)
-    ok &= finite
-    k[~finite] = 0.0
-    K[~finite] = 0.0
-    decrease[~finite] = 0.0
-    return BackwardPassResult(k, K, decrease, ok)
+    return k, K, -0.5 * W[:, nz, nz], ok
 
 
 def _positive_definite_or_identity(H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -377,10 +391,10 @@ def line_search(
     c = (c.unsqueeze(1) + alphas.view(1, n_a, 1, 1) * k.unsqueeze(1)).reshape(n, horizon, nu, 1)
     K_all = K.unsqueeze(1).expand(n_b, n_a, horizon, nu, nz).reshape(n, horizon, nu, nz)
     z_t = z[:, 0].repeat_interleave(n_a, 0)
-    step_numpy = _numpy_step(dynamics, z)
-    if step_numpy is not None:
-        z_new, u_new = _closed_loop_numpy(step_numpy, _to_numpy(z_t), _to_numpy(c[..., 0]),
-                                          _to_numpy(K_all), action_low, action_high)
+    mlp = _compiled_mlp(dynamics, z)
+    if mlp is not None:
+        z_new, u_new = closed_loop_rollout(mlp, _to_numpy(z_t), _to_numpy(c[..., 0]),
+                                           _to_numpy(K_all), action_low, action_high)
         z_new, u_new = torch.from_numpy(z_new).to(z), torch.from_numpy(u_new).to(z)
     else:
         states, actions = [z_t], []
@@ -396,28 +410,6 @@ def line_search(
     best_cost, best = costs.min(1)
     index = torch.arange(n_b, device=z.device) * n_a + best.to(z.device)
     return z_new[index], u_new[index], best_cost
-
-
-def _closed_loop_numpy(
-    step_numpy: Any, z0: np.ndarray, c: np.ndarray, K: np.ndarray, low: float, high: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Rollout of ``u_t = clip(c_t + K_t z_t)`` in float64 numpy (the line search's loop).
-
-    Shapes: ``z0`` ``(N, nz)``, ``c`` ``(N, T, nu)``, ``K`` ``(N, T, nu, nz)``; returns the
-    states ``(N, T + 1, nz)`` and actions ``(N, T, nu)``.
-    """
-    n, horizon, nu = c.shape
-    states = np.empty((n, horizon + 1, z0.shape[1]))
-    actions = np.empty((n, horizon, nu))
-    states[:, 0] = z_t = z0
-    with np.errstate(all="ignore"):  # a diverging candidate becomes inf/NaN, rejected later
-        for t in range(horizon):
-            u_t = np.einsum("nij,nj->ni", K[:, t], z_t) + c[:, t]
-            np.clip(u_t, low, high, out=u_t)
-            z_t = step_numpy(z_t, u_t)
-            actions[:, t] = u_t
-            states[:, t + 1] = z_t
-    return states, actions
 
 
 def _finite_cost(cost: QuadraticCost, z: Tensor, u: Tensor, repeats: int = 1) -> Tensor:
