@@ -17,7 +17,8 @@ from pcc_agent.planning import (
     plan,
     shift_plan,
 )
-from pcc_agent.planning.ilqr import box_qp, rollout
+from pcc_agent.planning.ilqr import backward_pass, rollout
+from pcc_agent.planning.kernels import box_qp
 
 DTYPE = torch.float64
 
@@ -321,29 +322,30 @@ def test_compiled_loops_match_torch_loops(activation: str) -> None:
     assert torch.equal(fast.status, slow.status)
 
 
-def test_compiled_one_action_riccati_matches_numpy_recursion() -> None:
-    from pcc_agent.planning.ilqr import _backward_pass_numpy, backward_pass
+@pytest.mark.parametrize("nu", [1, 2, 3])
+def test_compiled_riccati_matches_numpy_reference(nu: int) -> None:
+    from reference_riccati import backward_pass_reference
 
-    rng = np.random.default_rng(0)
-    n_b, horizon, nz = 5, 9, 4
+    rng = np.random.default_rng(nu)
+    n_b, horizon, nz = 6, 9, 4
     A = np.eye(nz) + 0.3 * rng.standard_normal((n_b, horizon, nz, nz))
-    B = rng.standard_normal((n_b, horizon, nz, 1))
+    B = rng.standard_normal((n_b, horizon, nz, nu))
     l_z = 3.0 * rng.standard_normal((n_b, horizon + 1, nz))
-    l_u = rng.standard_normal((n_b, horizon, 1))
-    l_zz, l_uu = 2.0 * np.eye(nz), np.array([[0.2]])
-    u = rng.uniform(-1, 1, (n_b, horizon, 1))
-    mu = np.array([0.0, 1e-6, 1.0, 0.0, 0.0])
-    l_uu_negative = np.array([[-50.0]])  # Q_uu + mu < 0 somewhere: the pass must fail
-    for cost_uu in (l_uu, l_uu_negative):
-        fast = backward_pass(A, B, l_z, l_u, l_zz, cost_uu, l_zz, u, mu, -0.5, 0.5)
-        if cost_uu is l_uu:  # both clamped (K = 0) and free steps are exercised
-            assert fast.ok.all() and 0 < (fast.K == 0).all(-1).sum() < n_b * horizon
-        k, K, decrease, ok = _backward_pass_numpy(A, B, l_z, l_u, l_zz, cost_uu, l_zz, u, mu,
-                                                  -0.5, 0.5)
+    l_u = rng.standard_normal((n_b, horizon, nu))
+    l_zz = 2.0 * np.eye(nz)
+    u = rng.uniform(-1, 1, (n_b, horizon, nu))
+    mu = np.array([0.0, 1e-6, 1.0, 0.0, 0.0, 10.0])
+    # a positive action cost, then a strongly negative one (Q_uu + mu I indefinite somewhere)
+    for l_uu in (0.2 * np.eye(nu), -50.0 * np.eye(nu)):
+        fast = backward_pass(A, B, l_z, l_u, l_zz, l_uu, l_zz, u, mu, -0.5, 0.5)
+        k, K, decrease, ok = backward_pass_reference(A, B, l_z, l_u, l_zz, l_uu, l_zz, u, mu,
+                                                     -0.5, 0.5)
         np.testing.assert_array_equal(fast.ok, ok)
-        good = ok
-        np.testing.assert_allclose(fast.k[good], k[good], rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(fast.K[good], K[good], rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(fast.expected_decrease[good], decrease[good], rtol=1e-9)
-    assert (fast.k >= -0.5 - u).all() and (fast.k <= 0.5 - u).all()
-    assert not ok.all()  # the negative action cost made some problems fail
+        np.testing.assert_allclose(fast.k[ok], k[ok], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(fast.K[ok], K[ok], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(fast.expected_decrease[ok], decrease[ok], rtol=1e-9)
+        if l_uu[0, 0] > 0:  # clamped (zero gain rows) and free steps are both exercised
+            assert ok.all() and 0 < (fast.K == 0).all(-1).sum() < n_b * horizon * nu
+            assert (fast.k >= -0.5 - u - 1e-12).all() and (fast.k <= 0.5 - u + 1e-12).all()
+        else:
+            assert not ok.all()

@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-__all__ = ["RELU", "TANH", "PackedMLP", "closed_loop_rollout", "pack_mlp"]
+__all__ = ["RELU", "TANH", "PackedMLP", "box_qp", "closed_loop_rollout", "pack_mlp", "riccati"]
 
 RELU = 0
 TANH = 1
@@ -137,17 +137,129 @@ def closed_loop_rollout(
     return states, actions
 
 
-@numba.njit(cache=True, fastmath=False)
-def _riccati_one_action(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
-                        k, K, decrease, ok):  # noqa: D103
-    n_b, horizon, nz, _ = A.shape
+@numba.njit(cache=True)
+def _cholesky(H, L):  # noqa: D103
+    """Lower Cholesky factor of ``H`` into ``L``; False when ``H`` is not positive definite."""
+    n = H.shape[0]
+    for j in range(n):
+        diag = H[j, j]
+        for m in range(j):
+            diag -= L[j, m] * L[j, m]
+        if not diag > 0.0:  # also catches NaN
+            return False
+        L[j, j] = np.sqrt(diag)
+        for i in range(j + 1, n):
+            acc = H[i, j]
+            for m in range(j):
+                acc -= L[i, m] * L[j, m]
+            L[i, j] = acc / L[j, j]
+        for i in range(j):
+            L[i, j] = 0.0
+    return True
+
+
+@numba.njit(cache=True)
+def _cholesky_solve(L, b, x):  # noqa: D103
+    """Solve ``L L^T x = b``."""
+    n = L.shape[0]
+    for i in range(n):
+        acc = b[i]
+        for m in range(i):
+            acc -= L[i, m] * x[m]
+        x[i] = acc / L[i, i]
+    for i in range(n - 1, -1, -1):
+        acc = x[i]
+        for m in range(i + 1, n):
+            acc -= L[m, i] * x[m]
+        x[i] = acc / L[i, i]
+
+
+@numba.njit(cache=True)
+def _clamped(x, grad, lower, upper, i):  # noqa: D103
+    return (x[i] <= lower[i] and grad[i] > 0.0) or (x[i] >= upper[i] and grad[i] < 0.0)
+
+
+@numba.njit(cache=True)
+def _box_qp(H, g, lower, upper, x, free, max_iterations):  # noqa: D103
+    """Projected-Newton box-QP in place on ``x`` (the start); ``free`` gets the free dims."""
+    n = H.shape[0]
+    grad = np.empty(n)
+    H_free = np.empty((n, n))
+    L = np.empty((n, n))
+    rhs = np.empty(n)
+    dx = np.empty(n)
+    candidate = np.empty(n)
+    for i in range(n):
+        x[i] = min(max(x[i], lower[i]), upper[i])
+    for _ in range(max_iterations):
+        for i in range(n):
+            acc = g[i]
+            for j in range(n):
+                acc += H[i, j] * x[j]
+            grad[i] = acc
+        for i in range(n):
+            free[i] = not _clamped(x, grad, lower, upper, i)
+        for i in range(n):
+            for j in range(n):
+                H_free[i, j] = H[i, j] if (free[i] and free[j]) else (1.0 if i == j else 0.0)
+            rhs[i] = -grad[i] if free[i] else 0.0
+        if not _cholesky(H_free, L):
+            break
+        _cholesky_solve(L, rhs, dx)
+        f0 = 0.0
+        for i in range(n):
+            f0 += x[i] * 0.5 * (grad[i] + g[i])
+        step = 1.0
+        moved = 0.0
+        for _ in range(12):
+            f = 0.0
+            slope = 0.0
+            for i in range(n):
+                candidate[i] = min(max(x[i] + step * dx[i], lower[i]), upper[i])
+            for i in range(n):
+                h_c = 0.0
+                for j in range(n):
+                    h_c += H[i, j] * candidate[j]
+                f += candidate[i] * (0.5 * h_c + g[i])
+                slope += grad[i] * (candidate[i] - x[i])
+            if f <= f0 + 0.1 * slope + 1e-15:
+                for i in range(n):
+                    moved = max(moved, abs(candidate[i] - x[i]))
+                    x[i] = candidate[i]
+                break
+            step *= 0.5
+        if moved < 1e-12:
+            break
+    for i in range(n):
+        acc = g[i]
+        for j in range(n):
+            acc += H[i, j] * x[j]
+        grad[i] = acc
+    for i in range(n):
+        free[i] = not _clamped(x, grad, lower, upper, i)
+
+
+@numba.njit(cache=True)
+def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
+             k, K, decrease, ok):  # noqa: D103
+    n_b, horizon, nz, nu = B.shape
     V_z = np.empty(nz)
     V_zz = np.empty((nz, nz))
     VA = np.empty((nz, nz))
-    Vb = np.empty(nz)
+    VB = np.empty((nz, nu))
     Q_z = np.empty(nz)
+    Q_u = np.empty(nu)
     Q_zz = np.empty((nz, nz))
-    Q_uz = np.empty(nz)
+    Q_uz = np.empty((nu, nz))
+    Q_uu = np.empty((nu, nu))
+    H = np.empty((nu, nu))
+    H_free = np.empty((nu, nu))
+    L = np.empty((nu, nu))
+    k_t = np.empty(nu)
+    K_t = np.empty((nu, nz))
+    rhs = np.empty(nu)
+    col = np.empty(nu)
+    free = np.empty(nu, dtype=np.bool_)
     for p in range(n_b):
         for i in range(nz):
             V_z[i] = l_z[p, horizon, i]
@@ -156,64 +268,149 @@ def _riccati_one_action(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper,
         change = 0.0
         good = True
         for t in range(horizon - 1, -1, -1):
-            # V_zz A and V_zz b (b = B_t, one column)
             for i in range(nz):
-                acc_b = 0.0
-                for m in range(nz):
-                    acc_b += V_zz[i, m] * B[p, t, m, 0]
-                Vb[i] = acc_b
                 for j in range(nz):
                     acc = 0.0
                     for m in range(nz):
                         acc += V_zz[i, m] * A[p, t, m, j]
                     VA[i, j] = acc
-            Q_u = l_u[p, t, 0]
-            Q_uu = l_uu[0, 0]
-            for m in range(nz):
-                Q_u += B[p, t, m, 0] * V_z[m]
-                Q_uu += B[p, t, m, 0] * Vb[m]
-            for j in range(nz):
-                acc_z = l_z[p, t, j]
-                acc_uz = 0.0
+                for j in range(nu):
+                    acc = 0.0
+                    for m in range(nz):
+                        acc += V_zz[i, m] * B[p, t, m, j]
+                    VB[i, j] = acc
+            for i in range(nz):
+                acc = l_z[p, t, i]
                 for m in range(nz):
-                    acc_z += A[p, t, m, j] * V_z[m]
-                    acc_uz += B[p, t, m, 0] * VA[m, j]
-                Q_z[j] = acc_z
-                Q_uz[j] = acc_uz
-                for i in range(nz):
+                    acc += A[p, t, m, i] * V_z[m]
+                Q_z[i] = acc
+                for j in range(nz):
                     acc = l_zz[i, j]
                     for m in range(nz):
                         acc += A[p, t, m, i] * VA[m, j]
                     Q_zz[i, j] = acc
-            h = Q_uu + mu[p]
-            if not h > 0.0:
+            for a in range(nu):
+                acc = l_u[p, t, a]
+                for m in range(nz):
+                    acc += B[p, t, m, a] * V_z[m]
+                Q_u[a] = acc
+                for j in range(nz):
+                    acc = 0.0
+                    for m in range(nz):
+                        acc += B[p, t, m, a] * VA[m, j]
+                    Q_uz[a, j] = acc
+                for b in range(nu):
+                    acc = l_uu[a, b]
+                    for m in range(nz):
+                        acc += B[p, t, m, a] * VB[m, b]
+                    Q_uu[a, b] = acc
+            # Gains from the regularized Hessian (the identity when it is not positive definite).
+            for a in range(nu):
+                for b in range(nu):
+                    H[a, b] = Q_uu[a, b] + (mu[p] if a == b else 0.0)
+            if not _cholesky(H, L):
                 good = False
-                h = 1.0
-            k_free = -Q_u / h
-            k_t = min(max(k_free, lower[p, t, 0]), upper[p, t, 0])
-            free = k_t == k_free
-            k[p, t, 0] = k_t
+                for a in range(nu):
+                    for b in range(nu):
+                        H[a, b] = 1.0 if a == b else 0.0
+                _cholesky(H, L)
+            for a in range(nu):
+                rhs[a] = -Q_u[a]
+            _cholesky_solve(L, rhs, k_t)
+            inside = True
+            for a in range(nu):
+                if k_t[a] < lower[p, t, a] or k_t[a] > upper[p, t, a]:
+                    inside = False
+            if inside:
+                for a in range(nu):
+                    free[a] = True
+            else:
+                _box_qp(H, Q_u, lower[p, t], upper[p, t], k_t, free, 20)
+            # K = -(H_ff)^{-1} Q_uz,f on the free rows, zero on the clamped ones.
+            for a in range(nu):
+                for b in range(nu):
+                    H_free[a, b] = H[a, b] if (free[a] and free[b]) else (
+                        1.0 if a == b else 0.0)
+            _cholesky(H_free, L)
             for j in range(nz):
-                K[p, t, 0, j] = -Q_uz[j] / h if free else 0.0
+                for a in range(nu):
+                    rhs[a] = -Q_uz[a, j] if free[a] else 0.0
+                _cholesky_solve(L, rhs, col)
+                for a in range(nu):
+                    K_t[a, j] = col[a]
             # V_z = Q_z + K^T Q_uu k + K^T Q_u + Q_uz^T k
             # V_zz = Q_zz + K^T Q_uu K + K^T Q_uz + Q_uz^T K (symmetrized)
             for i in range(nz):
-                K_i = K[p, t, 0, i]
-                V_z[i] = Q_z[i] + K_i * Q_uu * k_t + K_i * Q_u + Q_uz[i] * k_t
+                acc = Q_z[i]
+                for a in range(nu):
+                    quu_k = 0.0
+                    for b in range(nu):
+                        quu_k += Q_uu[a, b] * k_t[b]
+                    acc += K_t[a, i] * (quu_k + Q_u[a]) + Q_uz[a, i] * k_t[a]
+                V_z[i] = acc
                 for j in range(nz):
-                    K_j = K[p, t, 0, j]
-                    V_zz[i, j] = Q_zz[i, j] + K_i * Q_uu * K_j + K_i * Q_uz[j] + Q_uz[i] * K_j
+                    acc = Q_zz[i, j]
+                    for a in range(nu):
+                        quu_K = 0.0
+                        for b in range(nu):
+                            quu_K += Q_uu[a, b] * K_t[b, j]
+                        acc += K_t[a, i] * (quu_K + Q_uz[a, j]) + Q_uz[a, i] * K_t[a, j]
+                    V_zz[i, j] = acc
             for i in range(nz):
                 for j in range(i + 1, nz):
                     sym = 0.5 * (V_zz[i, j] + V_zz[j, i])
                     V_zz[i, j] = sym
                     V_zz[j, i] = sym
-            change += k_t * Q_u + 0.5 * k_t * Q_uu * k_t
+            for a in range(nu):
+                quu_k = 0.0
+                for b in range(nu):
+                    quu_k += Q_uu[a, b] * k_t[b]
+                change += k_t[a] * (Q_u[a] + 0.5 * quu_k)
+                k[p, t, a] = k_t[a]
+                for j in range(nz):
+                    K[p, t, a, j] = K_t[a, j]
         decrease[p] = -change
         ok[p] = good
 
 
-def riccati_one_action(
+def box_qp(
+    H: np.ndarray,
+    g: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    x0: np.ndarray,
+    max_iterations: int = 20,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Projected-Newton solver of small box-constrained quadratic programs, one per row.
+
+    Solves ``min_x 1/2 x^T H x + g^T x`` subject to ``lower <= x <= upper`` for each problem,
+    as in Tassa, Mansard & Todorov (2014): at each iteration the dimensions at a bound whose
+    gradient pushes outwards are clamped, a Newton step is taken on the free dimensions, and
+    a projected Armijo backtracking line search picks the step.
+
+    Args:
+        H: Positive definite Hessians ``(B, n, n)``.
+        g: Gradients ``(B, n)``.
+        lower: Lower bounds ``(B, n)`` (``lower <= upper``).
+        upper: Upper bounds ``(B, n)``.
+        x0: Starting points ``(B, n)`` (projected onto the box first).
+        max_iterations: Maximum number of Newton iterations.
+
+    Returns:
+        The solutions ``(B, n)`` and the free-dimension mask ``(B, n)`` at the solutions.
+    """
+    x = np.array(x0, dtype=np.float64)
+    free = np.empty(x.shape, dtype=np.bool_)
+    for b in range(x.shape[0]):
+        _box_qp(np.ascontiguousarray(H[b], dtype=np.float64),
+                np.ascontiguousarray(g[b], dtype=np.float64),
+                np.ascontiguousarray(lower[b], dtype=np.float64),
+                np.ascontiguousarray(upper[b], dtype=np.float64), x[b], free[b],
+                max_iterations)
+    return x, free
+
+
+def riccati(
     A: np.ndarray,
     B: np.ndarray,
     l_z: np.ndarray,
@@ -225,23 +422,36 @@ def riccati_one_action(
     upper: np.ndarray,
     mu: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Control-limited Riccati recursion for one action dimension (``nu = 1``).
+    """Control-limited Riccati recursion of iLQR, compiled (see :mod:`pcc_agent.planning.ilqr`).
 
-    The same recursion as :func:`pcc_agent.planning.ilqr.backward_pass` (see that module's
-    docstring), where the box-QP of each step is a clip of the scalar Newton step and the
-    feedback gain is zero when the step is clipped. Shapes as there; ``lower``, ``upper`` are
-    the bounds of the action deviation ``(B, T, 1)``.
+    At each step the action deviation solves the box-QP with ``H = Q_uu + mu I`` (Cholesky;
+    the identity stands in, and the problem is marked failed, when ``H`` is not positive
+    definite), the feedback gain acts on the free dimensions only, and the value function is
+    propagated with the unregularized ``Q_uu``.
+
+    Args:
+        A: State Jacobians ``(B, T, nz, nz)``.
+        B: Action Jacobians ``(B, T, nz, nu)``.
+        l_z: Cost state gradients ``(B, T + 1, nz)``.
+        l_u: Cost action gradients ``(B, T, nu)``.
+        l_zz: Stage cost state Hessian ``(nz, nz)``.
+        l_uu: Cost action Hessian ``(nu, nu)``.
+        l_zz_terminal: Terminal cost Hessian ``(nz, nz)``.
+        lower: Lower bounds of the action deviation ``(B, T, nu)``.
+        upper: Upper bounds of the action deviation ``(B, T, nu)``.
+        mu: Regularization ``(B,)``.
 
     Returns:
-        ``k`` ``(B, T, 1)``, ``K`` ``(B, T, 1, nz)``, the predicted decrease ``(B,)`` and
-        whether ``Q_uu + mu > 0`` at every step ``(B,)``.
+        ``k`` ``(B, T, nu)``, ``K`` ``(B, T, nu, nz)``, the predicted decrease
+        ``-sum_t (k^T Q_u + 1/2 k^T Q_uu k)`` ``(B,)`` and whether ``Q_uu + mu I`` was positive
+        definite at every step ``(B,)``.
     """
-    n_b, horizon, nz, _ = A.shape
-    k = np.empty((n_b, horizon, 1))
-    K = np.empty((n_b, horizon, 1, nz))
+    n_b, horizon, nz, nu = B.shape
+    k = np.empty((n_b, horizon, nu))
+    K = np.empty((n_b, horizon, nu, nz))
     decrease = np.empty(n_b)
     ok = np.empty(n_b, dtype=np.bool_)
-    c = np.ascontiguousarray
-    _riccati_one_action(c(A), c(B), c(l_z), c(l_u), c(l_zz), c(l_uu), c(l_zz_terminal),
-                        c(lower), c(upper), c(mu, dtype=np.float64), k, K, decrease, ok)
+    args = [np.ascontiguousarray(a, dtype=np.float64)
+            for a in (A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu)]
+    _riccati(*args, k, K, decrease, ok)
     return k, K, decrease, ok
