@@ -20,24 +20,7 @@ def box_qp(
     x0: np.ndarray,
     max_iterations: int = 20,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Batched projected-Newton solver of small box-constrained quadratic programs.
-
-    Solves ``min_x 1/2 x^T H x + g^T x`` subject to ``lower <= x <= upper`` for each problem,
-    as in Tassa, Mansard & Todorov (2014): at each iteration the dimensions at a bound whose
-    gradient pushes outwards are clamped, a Newton step is taken on the free dimensions, and
-    a projected Armijo line search (all step sizes evaluated at once) picks the step.
-
-    Args:
-        H: Positive definite Hessians ``(B, n, n)``.
-        g: Gradients ``(B, n)``.
-        lower: Lower bounds ``(B, n)`` (``lower <= upper``).
-        upper: Upper bounds ``(B, n)``.
-        x0: Starting points ``(B, n)`` (projected onto the box first).
-        max_iterations: Maximum number of Newton iterations.
-
-    Returns:
-        The solutions ``(B, n)`` and the free-dimension mask ``(B, n)`` at the solutions.
-    """
+    """Batched numpy projected-Newton box-QP (the reference of ``kernels.box_qp``)."""
     n = H.shape[-1]
     eye = np.eye(n, dtype=bool)
     steps = 0.5 ** np.arange(12.0)

@@ -175,8 +175,26 @@ def _cholesky_solve(L, b, x):  # noqa: D103
 
 
 @numba.njit(cache=True)
-def _clamped(x, grad, lower, upper, i):  # noqa: D103
-    return (x[i] <= lower[i] and grad[i] > 0.0) or (x[i] >= upper[i] and grad[i] < 0.0)
+def _gradient_and_free(H, g, x, lower, upper, grad, free):  # noqa: D103
+    """``grad = g + H x``; ``free[i]`` unless ``x_i`` sits at a bound its gradient pushes on."""
+    n = H.shape[0]
+    for i in range(n):
+        acc = g[i]
+        for j in range(n):
+            acc += H[i, j] * x[j]
+        grad[i] = acc
+    for i in range(n):
+        free[i] = not ((x[i] <= lower[i] and grad[i] > 0.0)
+                       or (x[i] >= upper[i] and grad[i] < 0.0))
+
+
+@numba.njit(cache=True)
+def _free_block(H, free, out):  # noqa: D103
+    """``H`` on the free dimensions, the identity on the clamped ones."""
+    n = H.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = H[i, j] if (free[i] and free[j]) else (1.0 if i == j else 0.0)
 
 
 @numba.njit(cache=True)
@@ -192,16 +210,9 @@ def _box_qp(H, g, lower, upper, x, free, max_iterations):  # noqa: D103
     for i in range(n):
         x[i] = min(max(x[i], lower[i]), upper[i])
     for _ in range(max_iterations):
+        _gradient_and_free(H, g, x, lower, upper, grad, free)
+        _free_block(H, free, H_free)
         for i in range(n):
-            acc = g[i]
-            for j in range(n):
-                acc += H[i, j] * x[j]
-            grad[i] = acc
-        for i in range(n):
-            free[i] = not _clamped(x, grad, lower, upper, i)
-        for i in range(n):
-            for j in range(n):
-                H_free[i, j] = H[i, j] if (free[i] and free[j]) else (1.0 if i == j else 0.0)
             rhs[i] = -grad[i] if free[i] else 0.0
         if not _cholesky(H_free, L):
             break
@@ -230,13 +241,7 @@ def _box_qp(H, g, lower, upper, x, free, max_iterations):  # noqa: D103
             step *= 0.5
         if moved < 1e-12:
             break
-    for i in range(n):
-        acc = g[i]
-        for j in range(n):
-            acc += H[i, j] * x[j]
-        grad[i] = acc
-    for i in range(n):
-        free[i] = not _clamped(x, grad, lower, upper, i)
+    _gradient_and_free(H, g, x, lower, upper, grad, free)
 
 
 @numba.njit(cache=True)
@@ -327,10 +332,7 @@ def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
             else:
                 _box_qp(H, Q_u, lower[p, t], upper[p, t], k_t, free, 20)
             # K = -(H_ff)^{-1} Q_uz,f on the free rows, zero on the clamped ones.
-            for a in range(nu):
-                for b in range(nu):
-                    H_free[a, b] = H[a, b] if (free[a] and free[b]) else (
-                        1.0 if a == b else 0.0)
+            _free_block(H, free, H_free)
             _cholesky(H_free, L)
             for j in range(nz):
                 for a in range(nu):
@@ -429,17 +431,8 @@ def riccati(
     definite), the feedback gain acts on the free dimensions only, and the value function is
     propagated with the unregularized ``Q_uu``.
 
-    Args:
-        A: State Jacobians ``(B, T, nz, nz)``.
-        B: Action Jacobians ``(B, T, nz, nu)``.
-        l_z: Cost state gradients ``(B, T + 1, nz)``.
-        l_u: Cost action gradients ``(B, T, nu)``.
-        l_zz: Stage cost state Hessian ``(nz, nz)``.
-        l_uu: Cost action Hessian ``(nu, nu)``.
-        l_zz_terminal: Terminal cost Hessian ``(nz, nz)``.
-        lower: Lower bounds of the action deviation ``(B, T, nu)``.
-        upper: Upper bounds of the action deviation ``(B, T, nu)``.
-        mu: Regularization ``(B,)``.
+    The arguments are those of :func:`pcc_agent.planning.ilqr.backward_pass`, except that
+    ``lower`` and ``upper`` ``(B, T, nu)`` bound the action deviation ``k`` (not the action).
 
     Returns:
         ``k`` ``(B, T, nu)``, ``K`` ``(B, T, nu, nz)``, the predicted decrease
