@@ -124,6 +124,53 @@ def _check_transition(model: EmbeddingModel, kind: str, method: str) -> None:
         )
 
 
+class _Posteriors(NamedTuple):
+    """The samples shared by the PCC and RCE bounds (see :func:`_sample_posteriors`)."""
+
+    x_t: torch.Tensor
+    x_next: torch.Tensor
+    mu_t: torch.Tensor
+    lv_t: torch.Tensor
+    lv_next: torch.Tensor
+    z_hat_next: torch.Tensor
+    back_mean: torch.Tensor
+    back_logvar: torch.Tensor
+    z_t: torch.Tensor
+    z_vae: torch.Tensor
+
+
+def _sample_posteriors(
+    model: EmbeddingModel, batch: TransitionBatch, generator: torch.Generator | None
+) -> _Posteriors:
+    """Encode both frames in one pass; draw ``z_hat_{t+1}``, ``z_t`` and the VAE sample.
+
+    ``z_hat_{t+1} ~ E(. | x_{t+1})``, ``z_t ~ Q(. | z_hat_{t+1}, x_t, u_t)``, ``z ~ E(. | x_t)``.
+    """
+    x_t, u, x_next = batch
+    n = x_t.shape[0]
+    images = to_float_image(torch.cat([x_t, x_next], dim=0))  # converted once, reused below
+    x_t, x_next = images[:n], images[n:]
+    mean_all, logvar_all = model.encode(images)
+    mu_t, mu_n = mean_all[:n], mean_all[n:]
+    lv_t, lv_n = logvar_all[:n], logvar_all[n:]
+    z_hat_next = gaussian_rsample(mu_n, lv_n, generator)
+    back_mean, back_logvar = model.backward_posterior(z_hat_next, x_t, u)
+    z_t = gaussian_rsample(back_mean, back_logvar, generator)
+    z_vae = gaussian_rsample(mu_t, lv_t, generator)
+    return _Posteriors(x_t, x_next, mu_t, lv_t, lv_n, z_hat_next, back_mean, back_logvar, z_t,
+                       z_vae)
+
+
+def _consistency_terms(
+    p: _Posteriors, trans_mean: torch.Tensor, trans_logvar: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``KL(Q || E(z_t | x_t))``, ``H(E(. | x_{t+1}))`` and ``-log F(z_hat_{t+1} | z_t, u_t)``."""
+    kl_backward = gaussian_kl(p.back_mean, p.back_logvar, p.mu_t, p.lv_t).mean()
+    entropy = gaussian_entropy(p.lv_next).mean()
+    transition_nll = -gaussian_log_prob(p.z_hat_next, trans_mean, trans_logvar).mean()
+    return kl_backward, entropy, transition_nll
+
+
 def pcc_loss(
     model: EmbeddingModel,
     batch: TransitionBatch,
@@ -166,29 +213,19 @@ def pcc_loss(
     _check_transition(model, "mlp", "pcc")
     if amortized and not model.config.amortized:
         raise ValueError("Amortized curvature needs ModelConfig(amortized=True).")
-    x_t, u, x_next = batch
-    n = x_t.shape[0]
-    images = to_float_image(torch.cat([x_t, x_next], dim=0))  # converted once, reused below
-    x_t, x_next = images[:n], images[n:]
-    mean_all, logvar_all = model.encode(images)
-    mu_t, mu_n = mean_all[:n], mean_all[n:]
-    lv_t, lv_n = logvar_all[:n], logvar_all[n:]
-
-    z_hat_next = gaussian_rsample(mu_n, lv_n, generator)
-    back_mean, back_logvar = model.backward_posterior(z_hat_next, x_t, u)
-    z_t = gaussian_rsample(back_mean, back_logvar, generator)
-    z_vae = gaussian_rsample(mu_t, lv_t, generator)
+    u = batch.action
+    n = u.shape[0]
+    p = _sample_posteriors(model, batch, generator)
+    x_t, x_next, mu_t, lv_t, z_vae = p.x_t, p.x_next, p.mu_t, p.lv_t, p.z_vae
 
     # One transition pass for F(. | z_t, u) and f(mu(x_t), u); one decoder pass for all images.
-    f_mean, f_logvar = model.transition(torch.cat([z_t, mu_t]), torch.cat([u, u]))
+    f_mean, f_logvar = model.transition(torch.cat([p.z_t, mu_t]), torch.cat([u, u]))
     trans_mean, trans_logvar, det_next = f_mean[:n], f_logvar[:n], f_mean[n:]
-    log_lik = model.log_likelihood(torch.cat([z_hat_next, z_vae, det_next]),
+    log_lik = model.log_likelihood(torch.cat([p.z_hat_next, z_vae, det_next]),
                                    torch.cat([x_next, x_t, x_next]))
     recon_next, recon_t, det_ll = log_lik[:n], log_lik[n:2 * n], log_lik[2 * n:]
 
-    kl_backward = gaussian_kl(back_mean, back_logvar, mu_t, lv_t).mean()
-    entropy = gaussian_entropy(lv_n).mean()
-    transition_nll = -gaussian_log_prob(z_hat_next, trans_mean, trans_logvar).mean()
+    kl_backward, entropy, transition_nll = _consistency_terms(p, trans_mean, trans_logvar)
     reconstruction = -recon_next.mean()
     beta = config.kl_scale
     consistency_term = kl_backward - entropy + transition_nll
@@ -371,24 +408,15 @@ def rce_loss(
         transition_nll, vae.
     """
     _check_transition(model, "e2c_linear", "rce")
-    x_t, u, x_next = batch
-    n = x_t.shape[0]
-    images = to_float_image(torch.cat([x_t, x_next], dim=0))
-    x_t, x_next = images[:n], images[n:]
-    mean_all, logvar_all = model.encode(images)
-    mu_t, mu_n = mean_all[:n], mean_all[n:]
-    lv_t, lv_n = logvar_all[:n], logvar_all[n:]
-    z_hat_next = gaussian_rsample(mu_n, lv_n, generator)
-    back_mean, back_logvar = model.backward_posterior(z_hat_next, x_t, u)
-    z_t = gaussian_rsample(back_mean, back_logvar, generator)
-    z_vae = gaussian_rsample(mu_t, lv_t, generator)
-    trans_mean, trans_logvar = model.transition(z_t, u)
+    n = batch.action.shape[0]
+    p = _sample_posteriors(model, batch, generator)
+    mu_t, lv_t = p.mu_t, p.lv_t
+    trans_mean, trans_logvar = model.transition(p.z_t, batch.action)
 
-    log_lik = model.log_likelihood(torch.cat([z_hat_next, z_vae]), torch.cat([x_next, x_t]))
+    log_lik = model.log_likelihood(torch.cat([p.z_hat_next, p.z_vae]),
+                                   torch.cat([p.x_next, p.x_t]))
     reconstruction = -log_lik[:n].mean()
-    kl_backward = gaussian_kl(back_mean, back_logvar, mu_t, lv_t).mean()
-    entropy = gaussian_entropy(lv_n).mean()
-    transition_nll = -gaussian_log_prob(z_hat_next, trans_mean, trans_logvar).mean()
+    kl_backward, entropy, transition_nll = _consistency_terms(p, trans_mean, trans_logvar)
     elbo = -(reconstruction + kl_backward - entropy + transition_nll)
     beta = config.kl_scale
     vae = -log_lik[n:].mean() + beta * gaussian_kl_standard(mu_t, lv_t).mean()
