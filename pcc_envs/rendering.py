@@ -298,9 +298,12 @@ _PAD = 3
 @functools.cache
 def _planar_assets(params: PlanarParams, view: PlanarView) -> tuple[np.ndarray, np.ndarray]:
     size = int(round(params.world_size))
-    cols, rows = _grid(size + 2 * _PAD, size + 2 * _PAD)
+    # Padded by PAD on the low side and PAD + 1 on the high side, so that an agent window
+    # fits for every position in the closed world [0, size]^2 (the crop removes the padding).
+    padded = size + 2 * _PAD + 1
+    cols, rows = _grid(padded, padded)
     cols, rows = cols[0] - _PAD, rows[0] - _PAD
-    background = np.zeros((size + 2 * _PAD,) * 2)
+    background = np.zeros((padded, padded))
     for cx, cy in params.obstacles:
         disk = np.clip(params.obstacle_radius + 0.5 - np.hypot(cols - cx, rows - cy), 0, 1)
         background = np.maximum(background, disk)
@@ -321,8 +324,20 @@ def _planar_assets(params: PlanarParams, view: PlanarView) -> tuple[np.ndarray, 
 def render_planar(
     states: np.ndarray, params: PlanarParams, view: PlanarView = PlanarView()
 ) -> np.ndarray:
-    """Planar frames: the obstacles in grey and the agent as a white disk at ``(x, y)``."""
+    """Planar frames: the obstacles in grey and the agent as a white disk at ``(x, y)``.
+
+    Raises:
+        ValueError: A state outside the world ``[0, world_size]^2`` (or not finite).
+    """
     states = np.asarray(states)
+    inside = np.isfinite(states).all(-1) & (states >= 0).all(-1) & (
+        states <= params.world_size).all(-1)
+    if not inside.all():
+        bad = states[~inside][0]
+        raise ValueError(
+            f"Cannot render the Planar state {bad.tolist()}: positions must lie in the "
+            f"world [0, {params.world_size}]^2."
+        )
     background, patches = _planar_assets(params, view)
     size = int(round(params.world_size))
     n = len(states)

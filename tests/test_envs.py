@@ -217,6 +217,18 @@ def test_render_rgb_array():
     assert image.shape == (240, 240, 3) and image.dtype == np.uint8
 
 
+def test_planar_renders_the_whole_closed_world_and_rejects_states_outside():
+    env = _make("pcc/Planar-v0").unwrapped
+    corners = np.array([[0.0, 0.0], [40.0, 40.0], [40.0, 0.0], [0.0, 40.0]])
+    batched = env.render_states(corners)
+    for i, corner in enumerate(corners):  # single-state and batched paths agree at the edges
+        np.testing.assert_array_equal(env.render_states(corner[None])[0], batched[i])
+    assert (batched.reshape(4, -1).max(1) == 255).all()  # the agent is visible in each corner
+    for bad in ([-0.5, 3.0], [3.0, 40.5], [np.nan, 3.0]):
+        with pytest.raises(ValueError, match="must lie in the world"):
+            env.render_states(np.array([bad]))
+
+
 def test_importing_pcc_envs_does_not_import_torch():
     code = (
         "import sys, pcc_envs, pcc_envs.data, pcc_envs.planar, pcc_envs.pendulum, "
