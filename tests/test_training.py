@@ -223,3 +223,15 @@ def test_decoder_bias_init_starts_from_the_mean_image():
     mean = np.clip(obs.astype(np.float64).mean(0) / 255.0, 1e-3, 1 - 1e-3)
     bias = model.decoder.net[-1].bias.detach().numpy().reshape(mean.shape)
     np.testing.assert_allclose(bias, np.log(mean / (1 - mean)), atol=1e-4)
+
+
+def test_latent_formation_benchmark_logs_r2(tmp_path):
+    from benchmarks.latent_formation import main
+
+    out = tmp_path / "formation.json"
+    main(["--epochs", "1", "--every", "1", "--probe", "200", "--data-dir", str(tmp_path),
+          "--model", "input_standardization=true", "--output", str(out)])
+    payload = json.loads(out.read_text())
+    (row,) = payload["rows"]
+    assert row["epoch"] == 1 and -1.0 <= row["r2"] <= 1.0 and row["encoder_std"] > 0
+    assert payload["model_config"]["input_standardization"] is True
