@@ -1,7 +1,11 @@
 """Reference implementation of the control-limited Riccati recursion in batched numpy.
 
 This was the planner's backward pass before the compiled kernel
-(:func:`pcc_agent.planning.kernels.riccati`); the tests check that both agree. Quadratic models
+(:func:`pcc_agent.planning.kernels.riccati`), less its closed-form branch for one action
+dimension (equivalent); the tests check that both agree. Its positive-definiteness test
+differs in one corner: with a Cholesky failure in the batch it also rejects matrices whose
+eigenvalues span more than 1e12, which the kernel accepts (the gains then overflow and the
+finiteness check rejects them). Quadratic models
 are kept in homogeneous form, ``1/2 [x; 1]^T M [x; 1]``, so that each step is
 ``Q = G^T W G + L`` (``G = [[A, B, 0], [0, 0, 1]]``) and ``W = P^T Q P`` with the affine
 policy ``P = [[I, 0], [K, k], [0, 1]]``; the corner of ``W_0`` accumulates the predicted change.

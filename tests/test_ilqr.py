@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from reference_riccati import backward_pass_reference
 
 from pcc_agent.planning import (
     FunctionDynamics,
@@ -324,8 +325,6 @@ def test_compiled_loops_match_torch_loops(activation: str) -> None:
 
 @pytest.mark.parametrize("nu", [1, 2, 3])
 def test_compiled_riccati_matches_numpy_reference(nu: int) -> None:
-    from reference_riccati import backward_pass_reference
-
     rng = np.random.default_rng(nu)
     n_b, horizon, nz = 6, 9, 4
     A = np.eye(nz) + 0.3 * rng.standard_normal((n_b, horizon, nz, nz))
@@ -349,3 +348,20 @@ def test_compiled_riccati_matches_numpy_reference(nu: int) -> None:
             assert (fast.k >= -0.5 - u - 1e-12).all() and (fast.k <= 0.5 - u + 1e-12).all()
         else:
             assert not ok.all()
+
+
+def test_compiled_loops_check_shapes_and_keep_autograd() -> None:
+    from pcc_agent.planning.kernels import closed_loop_rollout, riccati
+
+    dynamics = MLPDynamics.random(2, 1, (8,), torch.Generator().manual_seed(0), dtype=DTYPE)
+    with pytest.raises(ValueError, match="Shapes do not fit"):
+        closed_loop_rollout(dynamics.packed_mlp, np.zeros((1, 3)), np.zeros((1, 4, 1)),
+                            np.zeros((1, 4, 1, 3)), -1.0, 1.0)
+    with pytest.raises(ValueError, match="l_z has shape"):
+        riccati(np.zeros((1, 4, 2, 2)), np.zeros((1, 4, 2, 1)), np.zeros((1, 4, 2)),
+                np.zeros((1, 4, 1)), np.eye(2), np.eye(1), np.eye(2), -np.ones((1, 4, 1)),
+                np.ones((1, 4, 1)), 0.0)
+    # a gradient through the initial state takes the torch loops and reaches z0
+    z0 = torch.zeros(1, 2, dtype=DTYPE, requires_grad=True)
+    rollout(dynamics, z0, torch.ones(1, 3, 1, dtype=DTYPE))[:, -1].sum().backward()
+    assert z0.grad is not None and torch.isfinite(z0.grad).all()

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pcc_agent.planning.kernels import RELU, TANH, pack_mlp
+from pcc_agent.planning.kernels import RELU, TANH, PackedMLP, pack_mlp
 
 
 @runtime_checkable
@@ -125,15 +125,6 @@ def as_dynamics(obj: Any) -> LatentDynamics:
     )
 
 
-def _float64_numpy(t: Tensor) -> np.ndarray:
-    return t.detach().to(device="cpu", dtype=torch.float64).numpy()
-
-
-_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-    "relu": lambda a: np.maximum(a, 0.0, out=a),
-    "tanh": lambda a: np.tanh(a, out=a),
-}
-
 _ACTIVATIONS: dict[str, tuple[Callable[[Tensor], Tensor], Callable[[Tensor, Tensor], Tensor]]] = {
     # name: (activation, derivative as a function of (pre-activation, activation))
     "relu": (torch.relu, lambda a, h: (a > 0).to(a.dtype)),
@@ -183,10 +174,19 @@ class MLPDynamics:
         self._w_t = [w.T.contiguous() for w in self.weights[1:]]
         self.activation = activation
         self.residual = residual
-        #: float64 copy for the planner's compiled CPU loops (:mod:`pcc_agent.planning.kernels`)
-        self.packed_mlp = pack_mlp([_float64_numpy(w) for w in self.weights],
-                                   [_float64_numpy(b) for b in self.biases],
-                                   RELU if activation == "relu" else TANH, residual)
+        self._packed: PackedMLP | None = None
+
+    @property
+    def packed_mlp(self) -> PackedMLP:
+        """Float64 copy for the planner's compiled CPU loops (built on first use)."""
+        if self._packed is None:
+            def to_numpy(t: Tensor) -> np.ndarray:
+                return t.detach().to(device="cpu", dtype=torch.float64).numpy()
+
+            self._packed = pack_mlp([to_numpy(w) for w in self.weights],
+                                    [to_numpy(b) for b in self.biases],
+                                    RELU if self.activation == "relu" else TANH, self.residual)
+        return self._packed
 
     @classmethod
     def random(

@@ -131,8 +131,14 @@ def rollout(dynamics: LatentDynamics, z0: Tensor, u: Tensor) -> Tensor:
 
 
 def _compiled_mlp(dynamics: LatentDynamics, z: Tensor) -> PackedMLP | None:
-    """The dynamics' ``packed_mlp`` when it has one and ``z`` is on the CPU, else None."""
-    if z.device.type != "cpu":
+    """The dynamics' ``packed_mlp`` for the compiled loops, or None for the torch loops.
+
+    The compiled loops run in float64 on the CPU and carry no autograd graph: they are used
+    when the dynamics offer them, ``z`` is on the CPU and no gradient is being recorded
+    through ``z`` (results then match the torch loops to float64 rounding, or to ~1e-7 for
+    float32 inputs).
+    """
+    if z.device.type != "cpu" or (z.requires_grad and torch.is_grad_enabled()):
         return None
     return getattr(dynamics, "packed_mlp", None)
 

@@ -52,8 +52,9 @@ def pack_mlp(
     return PackedMLP(packed_w, packed_b, sizes, int(activation), bool(residual))
 
 
-@numba.njit(cache=True, fastmath=False)
-def _mlp_step(z, u, weights, biases, sizes, activation, residual, x, y, out):  # noqa: D103
+@numba.njit(cache=True)
+def _mlp_step(z, u, weights, biases, sizes, activation, residual, x, y, out):
+    """``out = f(z, u)`` for one state; ``x``, ``y`` are scratch vectors of the padded width."""
     nz = z.shape[0]
     nu = u.shape[0]
     for i in range(nz):
@@ -69,7 +70,7 @@ def _mlp_step(z, u, weights, biases, sizes, activation, residual, x, y, out):  #
             for i in range(n_in):
                 acc += weights[layer, o, i] * x[i]
             if layer < n_layers - 1:
-                if activation == 0:
+                if activation == RELU:
                     acc = acc if acc > 0.0 else 0.0
                 else:
                     acc = np.tanh(acc)
@@ -80,9 +81,10 @@ def _mlp_step(z, u, weights, biases, sizes, activation, residual, x, y, out):  #
         out[i] = x[i] + z[i] if residual else x[i]
 
 
-@numba.njit(cache=True, fastmath=False)
+@numba.njit(cache=True)
 def _closed_loop(z0, c, K, low, high, weights, biases, sizes, activation, residual,
-                 states, actions):  # noqa: D103
+                 states, actions):
+    """Fill ``states`` and ``actions`` with the rollouts of ``u = clip(c + K z)``."""
     n, horizon, nu = c.shape
     nz = z0.shape[1]
     width = weights.shape[1]
@@ -125,8 +127,20 @@ def closed_loop_rollout(
     Returns:
         States ``(N, T + 1, nz)`` and actions ``(N, T, nu)``, float64. A diverging rollout
         yields inf or NaN (the caller rejects it).
+
+    Raises:
+        ValueError: Shapes that do not fit together or do not fit the MLP (the compiled loop
+            does not check bounds).
     """
     n, horizon, nu = c.shape
+    nz = z0.shape[1] if z0.ndim == 2 else -1
+    if (z0.shape[0] != n or nz != mlp.sizes[-1] or nz + nu != mlp.sizes[0]
+            or K.shape != (n, horizon, nu, nz)):
+        raise ValueError(
+            f"Shapes do not fit an MLP with {mlp.sizes[0]} inputs and {mlp.sizes[-1]} outputs: "
+            f"z0 {z0.shape}, c {c.shape}, K {K.shape} (expected (N, nz), (N, T, nu), "
+            "(N, T, nu, nz) with nz + nu inputs)."
+        )
     states = np.empty((n, horizon + 1, z0.shape[1]))
     actions = np.empty((n, horizon, nu))
     _closed_loop(
@@ -138,7 +152,7 @@ def closed_loop_rollout(
 
 
 @numba.njit(cache=True)
-def _cholesky(H, L):  # noqa: D103
+def _cholesky(H, L):
     """Lower Cholesky factor of ``H`` into ``L``; False when ``H`` is not positive definite."""
     n = H.shape[0]
     for j in range(n):
@@ -159,7 +173,7 @@ def _cholesky(H, L):  # noqa: D103
 
 
 @numba.njit(cache=True)
-def _cholesky_solve(L, b, x):  # noqa: D103
+def _cholesky_solve(L, b, x):
     """Solve ``L L^T x = b``."""
     n = L.shape[0]
     for i in range(n):
@@ -175,7 +189,7 @@ def _cholesky_solve(L, b, x):  # noqa: D103
 
 
 @numba.njit(cache=True)
-def _gradient_and_free(H, g, x, lower, upper, grad, free):  # noqa: D103
+def _gradient_and_free(H, g, x, lower, upper, grad, free):
     """``grad = g + H x``; ``free[i]`` unless ``x_i`` sits at a bound its gradient pushes on."""
     n = H.shape[0]
     for i in range(n):
@@ -189,7 +203,14 @@ def _gradient_and_free(H, g, x, lower, upper, grad, free):  # noqa: D103
 
 
 @numba.njit(cache=True)
-def _free_block(H, free, out):  # noqa: D103
+def _set_identity(M):
+    for i in range(M.shape[0]):
+        for j in range(M.shape[1]):
+            M[i, j] = 1.0 if i == j else 0.0
+
+
+@numba.njit(cache=True)
+def _free_block(H, free, out):
     """``H`` on the free dimensions, the identity on the clamped ones."""
     n = H.shape[0]
     for i in range(n):
@@ -198,7 +219,7 @@ def _free_block(H, free, out):  # noqa: D103
 
 
 @numba.njit(cache=True)
-def _box_qp(H, g, lower, upper, x, free, max_iterations):  # noqa: D103
+def _box_qp(H, g, lower, upper, x, free, max_iterations):
     """Projected-Newton box-QP in place on ``x`` (the start); ``free`` gets the free dims."""
     n = H.shape[0]
     grad = np.empty(n)
@@ -246,7 +267,8 @@ def _box_qp(H, g, lower, upper, x, free, max_iterations):  # noqa: D103
 
 @numba.njit(cache=True)
 def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
-             k, K, decrease, ok):  # noqa: D103
+             k, K, decrease, ok):
+    """Fill ``k``, ``K``, ``decrease`` and ``ok`` (see :func:`riccati`)."""
     n_b, horizon, nz, nu = B.shape
     V_z = np.empty(nz)
     V_zz = np.empty((nz, nz))
@@ -261,6 +283,7 @@ def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
     H_free = np.empty((nu, nu))
     L = np.empty((nu, nu))
     k_t = np.empty(nu)
+    quu_k = np.empty(nu)
     K_t = np.empty((nu, nz))
     rhs = np.empty(nu)
     col = np.empty(nu)
@@ -315,9 +338,7 @@ def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
                     H[a, b] = Q_uu[a, b] + (mu[p] if a == b else 0.0)
             if not _cholesky(H, L):
                 good = False
-                for a in range(nu):
-                    for b in range(nu):
-                        H[a, b] = 1.0 if a == b else 0.0
+                _set_identity(H)
                 _cholesky(H, L)
             for a in range(nu):
                 rhs[a] = -Q_u[a]
@@ -333,7 +354,10 @@ def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
                 _box_qp(H, Q_u, lower[p, t], upper[p, t], k_t, free, 20)
             # K = -(H_ff)^{-1} Q_uz,f on the free rows, zero on the clamped ones.
             _free_block(H, free, H_free)
-            _cholesky(H_free, L)
+            if not _cholesky(H_free, L):  # PD in exact arithmetic; lost only to rounding
+                good = False
+                _set_identity(H_free)
+                _cholesky(H_free, L)
             for j in range(nz):
                 for a in range(nu):
                     rhs[a] = -Q_uz[a, j] if free[a] else 0.0
@@ -342,13 +366,15 @@ def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
                     K_t[a, j] = col[a]
             # V_z = Q_z + K^T Q_uu k + K^T Q_u + Q_uz^T k
             # V_zz = Q_zz + K^T Q_uu K + K^T Q_uz + Q_uz^T K (symmetrized)
+            for a in range(nu):
+                acc = 0.0
+                for b in range(nu):
+                    acc += Q_uu[a, b] * k_t[b]
+                quu_k[a] = acc
             for i in range(nz):
                 acc = Q_z[i]
                 for a in range(nu):
-                    quu_k = 0.0
-                    for b in range(nu):
-                        quu_k += Q_uu[a, b] * k_t[b]
-                    acc += K_t[a, i] * (quu_k + Q_u[a]) + Q_uz[a, i] * k_t[a]
+                    acc += K_t[a, i] * (quu_k[a] + Q_u[a]) + Q_uz[a, i] * k_t[a]
                 V_z[i] = acc
                 for j in range(nz):
                     acc = Q_zz[i, j]
@@ -364,10 +390,7 @@ def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
                     V_zz[i, j] = sym
                     V_zz[j, i] = sym
             for a in range(nu):
-                quu_k = 0.0
-                for b in range(nu):
-                    quu_k += Q_uu[a, b] * k_t[b]
-                change += k_t[a] * (Q_u[a] + 0.5 * quu_k)
+                change += k_t[a] * (Q_u[a] + 0.5 * quu_k[a])
                 k[p, t, a] = k_t[a]
                 for j in range(nz):
                     K[p, t, a, j] = K_t[a, j]
@@ -375,7 +398,7 @@ def _riccati(A, B, l_z, l_u, l_zz, l_uu, l_zz_terminal, lower, upper, mu,
         ok[p] = good
 
 
-def box_qp(
+def box_qp(  # the planner calls the compiled solver inside the recursion; this is for tests
     H: np.ndarray,
     g: np.ndarray,
     lower: np.ndarray,
@@ -427,9 +450,11 @@ def riccati(
     """Control-limited Riccati recursion of iLQR, compiled (see :mod:`pcc_agent.planning.ilqr`).
 
     At each step the action deviation solves the box-QP with ``H = Q_uu + mu I`` (Cholesky;
-    the identity stands in, and the problem is marked failed, when ``H`` is not positive
-    definite), the feedback gain acts on the free dimensions only, and the value function is
-    propagated with the unregularized ``Q_uu``.
+    the identity stands in, and the problem is marked failed, when a pivot is not positive),
+    the feedback gain acts on the free dimensions only, and the value function is propagated
+    with the unregularized ``Q_uu``. The kernel never raises on numbers: a NaN or an overflow
+    ends as non-finite gains or a failed factorization, which the caller
+    (:func:`pcc_agent.planning.ilqr.backward_pass`) turns into a failed problem.
 
     The arguments are those of :func:`pcc_agent.planning.ilqr.backward_pass`, except that
     ``lower`` and ``upper`` ``(B, T, nu)`` bound the action deviation ``k`` (not the action).
@@ -440,6 +465,14 @@ def riccati(
         definite at every step ``(B,)``.
     """
     n_b, horizon, nz, nu = B.shape
+    expected = {"A": (A, (n_b, horizon, nz, nz)), "l_z": (l_z, (n_b, horizon + 1, nz)),
+                "l_u": (l_u, (n_b, horizon, nu)), "l_zz": (l_zz, (nz, nz)),
+                "l_uu": (l_uu, (nu, nu)), "l_zz_terminal": (l_zz_terminal, (nz, nz)),
+                "lower": (lower, (n_b, horizon, nu)), "upper": (upper, (n_b, horizon, nu))}
+    for name, (array, shape) in expected.items():
+        if np.shape(array) != shape:
+            raise ValueError(f"{name} has shape {np.shape(array)}, expected {shape}.")
+    mu = np.broadcast_to(np.asarray(mu, dtype=np.float64), (n_b,))
     k = np.empty((n_b, horizon, nu))
     K = np.empty((n_b, horizon, nu, nz))
     decrease = np.empty(n_b)
