@@ -112,7 +112,7 @@ def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any]
         return None
     if spec is not None and record.get("spec") != asdict(spec):
         return None
-    if spec is not None and spec.method != ORACLE and not _same_planner(record, spec):
+    if spec is not None and not _same_planner(record, spec):
         return None
     return record
 
@@ -130,9 +130,20 @@ def _preset_for(spec: RunSpec) -> Any:
 
 
 def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
-    """Whether a record was evaluated with the planner settings the preset has now."""
+    """Whether a record was evaluated by this planner revision with the preset's settings.
+
+    Records without a revision were evaluated by revision 1. Oracle records only need the
+    revision (their settings are ``ORACLE_CONFIGS``, part of the record).
+    """
+    from pcc_agent.planning import PLANNER_REVISION
+
+    config = record.get("config", {})
+    if config.get("planner_revision", 1) != PLANNER_REVISION:
+        return False
+    if spec.method == ORACLE:
+        return True
     wanted = json.loads(json.dumps(asdict(_preset_for(spec).planner)))
-    return record.get("config", {}).get("planner") == wanted
+    return config.get("planner") == wanted
 
 
 def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = None) -> dict:
@@ -150,6 +161,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     torch.set_num_threads(1)
 
     from pcc_agent.evaluation import evaluate_control, task_seeds
+    from pcc_agent.planning import PLANNER_REVISION
 
     env_kwargs = {"noise_std": spec.noise_std} if spec.noise_std else {}
     seeds = task_seeds(spec.task_seed, spec.num_tasks)
@@ -172,7 +184,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         from pcc_agent.oracle import OracleController, oracle_config_for
 
         config = oracle_config_for(spec.env_id)
-        record["config"] = {"oracle": asdict(config)}
+        record["config"] = {"oracle": asdict(config), "planner_revision": PLANNER_REVISION}
         record["train_seconds"] = 0.0
         evaluation = evaluate_control(
             lambda env: OracleController(env, config), spec.env_id, seeds, env_kwargs
@@ -219,6 +231,7 @@ def _reevaluate(
     """
     from pcc_agent.agent import PCCAgent
     from pcc_agent.evaluation import evaluate_control
+    from pcc_agent.planning import PLANNER_REVISION
 
     agent = PCCAgent.load(checkpoint_path(results_dir, spec))
     planner = _preset_for(spec).planner
@@ -226,7 +239,8 @@ def _reevaluate(
     start = time.perf_counter()
     evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
     record = dict(record)
-    record["config"] = {**record.get("config", {}), "planner": asdict(planner)}
+    record["config"] = {**record.get("config", {}), "planner": asdict(planner),
+                        "planner_revision": PLANNER_REVISION}
     record["previous_planner_results"] = record.get("percentages")
     record["eval_seconds"] = time.perf_counter() - start
     record["percentages"] = [t.percent_in_goal for t in evaluation.tasks]
@@ -500,9 +514,9 @@ def load_records(results_dir: Path) -> list[dict[str, Any]]:
         except TypeError:  # a hand-made or older record without a full spec: no check
             records.append(rec)
             continue
-        if spec.method != ORACLE and not _same_planner(rec, spec):
-            print(f"Not aggregated (evaluated with other planner settings than the preset's; "
-                  f"re-run the grid to re-evaluate or retrain it): {path}")
+        if not _same_planner(rec, spec):
+            print(f"Not aggregated (evaluated by another planner revision or with other planner "
+                  f"settings than the preset's; re-run the grid to re-evaluate it): {path}")
             continue
         records.append(rec)
     return records

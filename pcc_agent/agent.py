@@ -34,6 +34,7 @@ import pcc_agent
 from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_weights, save_checkpoint
 from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
+from pcc_agent.planning import PLANNER_REVISION
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.ilqr import plan
@@ -433,6 +434,7 @@ class PCCAgent:
             "train": self.preset.train.to_dict(),
             "data": dataclasses.asdict(self.preset.data),
             "planner": dataclasses.asdict(self.preset.planner),
+            "planner_revision": PLANNER_REVISION,
             "episode_length": getattr(self.env.spec, "max_episode_steps", None),
             "observation_shape": list(self.obs_shape),
             "action_dim": self.action_dim,

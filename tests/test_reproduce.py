@@ -17,6 +17,7 @@ from benchmarks.reproduce import (
     interquartile_mean,
     load_finished_run,
 )
+from pcc_agent.planning import PLANNER_REVISION
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -116,10 +117,16 @@ def test_record_of_other_settings_is_stale(tmp_path):
 
     planner = json.loads(json.dumps(dataclasses.asdict(get_preset(spec.env_id).planner)))
     record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": [],
-              "config": {"planner": planner}}
+              "config": {"planner": planner, "planner_revision": PLANNER_REVISION}}
     path.parent.mkdir(parents=True)
     path.write_text(json.dumps(record))
     assert load_finished_run(path, spec) is not None
+    # Evaluated by an older planner (a record without a revision is revision 1): stale.
+    for old in ({**record["config"], "planner_revision": PLANNER_REVISION - 1},
+                {"planner": planner}):
+        path.write_text(json.dumps({**record, "config": old}))
+        assert load_finished_run(path, spec) is None
+    path.write_text(json.dumps(record))
     # Same file path, but --num-tasks / --max-epochs changed: the old record must not count.
     assert load_finished_run(path, dataclasses.replace(spec, num_tasks=5)) is None
     assert load_finished_run(path, dataclasses.replace(spec, max_epochs=3)) is None
@@ -134,7 +141,7 @@ def test_run_with_old_planner_settings_is_reevaluated_not_retrained(tmp_path):
     path.write_text(json.dumps(record))
     assert load_finished_run(path, spec) is None
     again = execute_run(spec, tmp_path, str(tmp_path / "data"))
-    assert again["reevaluated"] is True
+    assert again["reevaluated"] is True and first["config"]["planner_revision"] == PLANNER_REVISION
     assert again["train_seconds"] == first["train_seconds"]
     assert again["config"]["planner"]["plan_length"] == first["config"]["planner"]["plan_length"]
     assert load_finished_run(path, spec) is not None
