@@ -57,6 +57,7 @@ class ReproducePreset:
         num_samples: Per-env data-set size overrides (default: the paper's sizes).
         max_epochs: Override of the training epoch cap (None: the env preset's).
         task_seed: Base seed of the control tasks (the same tasks for every model and method).
+        model_seeds: Explicit model seeds to run (None: ``0 .. num_models - 1``).
     """
 
     name: str
@@ -69,6 +70,13 @@ class ReproducePreset:
     num_samples: dict[str, int] = field(default_factory=dict)
     max_epochs: int | None = None
     task_seed: int = 2020
+    model_seeds: tuple[int, ...] | None = None
+
+    def seeds(self) -> tuple[int, ...]:
+        """The model seeds of the grid."""
+        if self.model_seeds is not None:
+            return self.model_seeds
+        return tuple(range(self.num_models))
 
     def replace(self, **changes: Any) -> ReproducePreset:
         """A copy with some fields changed (used by the command-line overrides)."""

@@ -285,7 +285,7 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[Ru
             }
             if include_oracle and _has_oracle(env_id):
                 runs.append(RunSpec(method=ORACLE, seed=0, **common))
-            for seed in range(preset.num_models):
+            for seed in preset.seeds():
                 for method in preset.methods:
                     runs.append(
                         RunSpec(
@@ -621,6 +621,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--envs", nargs="+", help="Subset of the preset's env ids.")
     parser.add_argument("--methods", nargs="+", help="Subset / override of the methods.")
     parser.add_argument("--num-models", type=int, help="Override the number of models.")
+    parser.add_argument(
+        "--seeds", type=int, nargs="+",
+        help="Run only these model seeds (e.g. to split a grid over machines, or to fill in "
+        "missing models); overrides --num-models.",
+    )
     parser.add_argument("--num-tasks", type=int, help="Override the number of tasks per model.")
     parser.add_argument("--max-epochs", type=int, help="Override the training epoch cap.")
     parser.add_argument("--noise", type=float, nargs="+", help="Override the noise levels.")
@@ -660,6 +665,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["methods"] = tuple(args.methods)
         if args.num_models is not None:
             changes["num_models"] = args.num_models
+        if args.seeds:
+            if min(args.seeds) < 0:
+                raise SystemExit(f"--seeds must be non-negative, got {args.seeds}.")
+            changes["model_seeds"] = tuple(sorted(set(args.seeds)))
         if args.num_tasks is not None:
             changes["num_tasks"] = args.num_tasks
         if args.max_epochs is not None:

@@ -145,3 +145,15 @@ def test_run_with_old_planner_settings_is_reevaluated_not_retrained(tmp_path):
     assert again["train_seconds"] == first["train_seconds"]
     assert again["config"]["planner"]["plan_length"] == first["config"]["planner"]["plan_length"]
     assert load_finished_run(path, spec) is not None
+
+
+def test_explicit_model_seeds_select_the_grid_cells():
+    from benchmarks.presets import REPRODUCE_PRESETS
+    from benchmarks.reproduce import expand_grid
+
+    preset = REPRODUCE_PRESETS["paper"].replace(envs=("pcc/Planar-v0",), methods=("pcc", "e2c"),
+                                                model_seeds=(3, 7))
+    runs = expand_grid(preset, include_oracle=False)
+    assert sorted((r.method, r.seed) for r in runs) == [("e2c", 3), ("e2c", 7), ("pcc", 3),
+                                                         ("pcc", 7)]
+    assert {r.seed for r in expand_grid(preset.replace(model_seeds=None), False)} == set(range(10))
