@@ -473,6 +473,21 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _training_recipe(settings: dict[str, Any]) -> str:
+    """A short description of how the models of a row were trained (from the run config)."""
+    model, train = settings.get("model", {}), settings.get("train", {})
+    changes = []
+    if model.get("input_standardization"):
+        changes.append("input standardization")
+    if train.get("warmup_epochs"):
+        changes.append(f"{train['warmup_epochs']}-epoch KL warm-up")
+    recipe = "paper recipe" if not changes else "paper recipe + " + " + ".join(changes)
+    if not train:
+        return recipe
+    return (f"{recipe}; early stop after {train.get('patience')} epochs without improvement, "
+            f"not before epoch {train.get('min_epochs', 0)}, at most {train.get('epochs')}")
+
+
 def settings_table(rows: list[dict[str, Any]]) -> str:
     """The evaluation settings of every (env, preset): printed beside the results."""
     from benchmarks.presets import TASK_STARTS
@@ -484,8 +499,8 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
     lines = [
         "| env | preset | episode length | plan length | iLQR iters (first / MPC) "
         "| candidates | kappa (Q = kappa I) | R | action bounds | data size "
-        "| tasks per model (task seed) | model seeds | task starts |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| tasks per model (task seed) | model seeds | task starts | training |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (env, preset), row in seen.items():
         s = row["settings"]
@@ -497,7 +512,7 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
             f"| [{p.get('action_low')}, {p.get('action_high')}] "
             f"| {s.get('data', {}).get('num_samples')} "
             f"| {row['n_tasks']} ({row.get('task_seed', '-')}) | {row['seeds']} "
-            f"| {TASK_STARTS.get(env, '-')} |"
+            f"| {TASK_STARTS.get(env, '-')} | {_training_recipe(s)} |"
         )
     return "\n".join(lines) + "\n"
 
