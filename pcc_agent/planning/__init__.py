@@ -16,11 +16,11 @@ from pcc_agent.planning.dynamics import (
 from pcc_agent.planning.ilqr import ILQRResult, Status, ilqr_solve, plan
 from pcc_agent.planning.mpc import LatentMPC, shift_plan
 
-#: Revision of the planner's numerics, written beside every benchmark evaluation. Bumped
-#: whenever a change alters the actions planned for the same model and settings, even by
-#: rounding (closed-loop outcomes on Planar are chaotic in them: one model scored 36.5% with
-#: revision 1 and 20.5% with revision 2), so that the reproduction pipeline re-evaluates
-#: records of an older planner. 1: torch float32 loops; 2: compiled float64 loops.
+#: Revision of the planner's numerics, written beside every benchmark evaluation. Bump it
+#: whenever a change can alter the actions planned for the same model and settings (closed-loop
+#: outcomes near obstacles can flip on small differences), so that the reproduction pipeline
+#: re-evaluates records of an older planner from their saved agents. 1: torch float32 loops;
+#: 2: compiled float64 loops (re-evaluating the Planar records gave the same per-task results).
 PLANNER_REVISION = 2
 
 __all__ = [
