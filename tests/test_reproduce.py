@@ -101,6 +101,12 @@ def test_aggregate_all_and_top1():
     rows = aggregate([rec(0, [0.0, 10.0]), rec(1, [50.0, 70.0])])
     (row,) = rows
     assert row["mean_all"] == 32.5 and row["mean_top1"] == 60.0 and row["top1_seed"] == 1
+    assert row["oracle_mean"] is None
+    # an oracle run of another preset on the same tasks is the ceiling of this row too
+    oracle = rec(0, [40.0, 60.0])
+    oracle["spec"] = {**oracle["spec"], "method": "oracle", "preset": "other"}
+    with_oracle = aggregate([rec(0, [0.0, 10.0]), oracle])
+    assert next(r for r in with_oracle if r["method"] == "pcc")["oracle_mean"] == 50.0
     assert np.isclose(row["se_all"], np.std([0, 10, 50, 70], ddof=1) / 2)
     assert row["n_models"] == 2 and row["n_tasks"] == 2
     assert row["iqm_ci"][0] <= row["iqm"] <= row["iqm_ci"][1]
