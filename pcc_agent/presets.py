@@ -407,8 +407,8 @@ _TRAINING = {
 # The "fast" variant of Planar keeps the paper's networks and objective and changes how they
 # are trained: per-pixel input standardization and a 20-epoch KL warm-up leave the collapsed
 # plateau several times sooner (docs/training.md: validation loss 156.9 after 65 epochs, which
-# the paper recipe reached after 265). Planar grid so far: all 4 fast-recipe latent spaces
-# formed, 16.6% in goal on average, against 2 of 6 collapsed and 9.8% for the paper recipe.
+# the paper recipe reached after 265). Planar grid so far: all 5 fast-recipe latent spaces
+# formed, 19.1% in goal on average, against 2 of 6 collapsed and 9.8% for the paper recipe.
 _FAST_TRAINING = {
     "pcc/Planar-v0": TrainConfig(min_epochs=150, warmup_epochs=20),
 }
