@@ -7,7 +7,10 @@ the same function, task seeds and metric (percentage of steps in goal) as the re
 pipeline. The PCC / E2C / RCE points (at their data-set sizes) and the oracle ceiling are
 read from the reproduction pipeline's run files for the same env and task seeds.
 
-Every (env, policy, seed) run writes one JSON file (resumable: finished runs are skipped).
+Every (env, policy, budget, seed) run writes one JSON file,
+``runs/<env>/sac_<observation>/budget<steps>/seed<seed>.json`` (resumable: finished runs are
+skipped). Runs with different budgets are different agents (SAC's ``learning_starts`` and
+buffer depend on the budget), so each budget has its own learning curve in the outputs.
 
 Replay buffer: one transition of an 80x80x2 observation costs 2 x 12.8 kB (obs and next obs,
 uint8), so the default buffer of 100,000 transitions takes about 2.6 GB; 40x40 and 48x48
@@ -84,6 +87,18 @@ def load_finished_sac_run(
     return record
 
 
+def sac_run_path(results_dir: Path, env_id: str, observation: str, steps: int, seed: int) -> Path:
+    """Where the record of one SAC run (env, observation kind, step budget, seed) lives."""
+    return (
+        results_dir
+        / "runs"
+        / env_id.replace("/", "_")
+        / f"sac_{observation}"
+        / f"budget{steps}"
+        / f"seed{seed}.json"
+    )
+
+
 def run_sac(
     env_id: str,
     observation: str,
@@ -101,9 +116,7 @@ def run_sac(
 
     from pcc_agent.evaluation import evaluate_control
 
-    path = (
-        results_dir / "runs" / env_id.replace("/", "_") / f"sac_{observation}" / f"seed{seed}.json"
-    )
+    path = sac_run_path(results_dir, env_id, observation, steps, seed)
     wanted = sorted({c for c in checkpoints if c <= steps} | {steps})
     record = load_finished_sac_run(path, steps, wanted, task_seed_list)
     if record is not None:
@@ -193,16 +206,26 @@ def _se(x: np.ndarray) -> float:
 
 
 def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, Any]:
-    """Learning curves (mean and SE over seeds) and the model-based points, as one dict."""
+    """Learning curves (mean and SE over seeds) and the model-based points, as one dict.
+
+    One curve per policy and step budget, keyed ``"sac_<observation> (<steps> steps)"``.
+    """
     curves: dict[str, Any] = {}
     run_dir = results_dir / "runs" / env_id.replace("/", "_")
-    for sub in sorted(run_dir.glob("sac_*")) if run_dir.exists() else []:
+    budget_dirs = sorted(
+        run_dir.glob("sac_*/budget*") if run_dir.exists() else [],
+        key=lambda d: (d.parent.name, int(d.name.removeprefix("budget"))),
+    )
+    for sub in budget_dirs:
         records = [json.loads(p.read_text()) for p in sorted(sub.glob("seed*.json"))]
+        records = [rec for rec in records if rec.get("status") == "done"]
+        if not records:
+            continue
         points: dict[int, list[float]] = {}
         for rec in records:
             for point in rec["curve"]:
                 points.setdefault(point["env_steps"], []).append(point["mean"])
-        curves[sub.name] = [
+        curves[f"{sub.parent.name} ({sub.name.removeprefix('budget')} steps)"] = [
             {
                 "env_steps": steps,
                 "mean": float(np.mean(v)),
@@ -254,7 +277,7 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
             f"| {label} | {samples} | {entry['mean']:.1f} ± {entry['se']:.1f} "
             f"| {entry['n_tasks']} tasks |"
         )
-    for policy, curve in sorted(summary["sac"].items()):
+    for policy, curve in summary["sac"].items():
         for p in curve:
             lines.append(
                 f"| {policy} | {p['env_steps']} | {p['mean']:.1f} ± {p['se']:.1f} "
@@ -262,7 +285,7 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
             )
     (results_dir / f"{name}.md").write_text("\n".join(lines) + "\n")
     fig, ax = plt.subplots(figsize=(6, 4))
-    for policy, curve in sorted(summary["sac"].items()):
+    for policy, curve in summary["sac"].items():
         x = [p["env_steps"] for p in curve]
         y = np.array([p["mean"] for p in curve])
         e = np.array([p["se"] for p in curve])

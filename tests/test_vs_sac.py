@@ -16,18 +16,27 @@ def test_vs_sac_tiny_budget(tmp_path):
     ])
     assert code == 0
     summary = json.loads((out / "Planar-v0.json").read_text())
-    for policy in ("sac_image", "sac_state"):
+    for policy in ("sac_image (120 steps)", "sac_state (120 steps)"):
         curve = summary["sac"][policy]
         assert [p["env_steps"] for p in curve] == [60, 120]
         assert all(0.0 <= p["mean"] <= 100.0 for p in curve)
     assert (out / "Planar-v0.png").exists() and (out / "Planar-v0.md").exists()
     # Finished runs are reused, not retrained.
-    record = out / "runs" / "pcc_Planar-v0" / "sac_image" / "seed0.json"
+    record = vs_sac.sac_run_path(out, "pcc/Planar-v0", "image", 120, 0)
+    assert record.exists()
     mtime = record.stat().st_mtime
     vs_sac.main(["--env", "pcc/Planar-v0", "--steps", "120", "--checkpoints", "60",
                  "--seeds", "0", "--num-tasks", "1", "--observations", "image",
                  "--results-dir", str(out), "--reproduce-dir", str(tmp_path / "none")])
     assert record.stat().st_mtime == mtime
+    # Another budget is another agent with its own curve; the first one is kept.
+    vs_sac.main(["--env", "pcc/Planar-v0", "--steps", "90", "--checkpoints", "60",
+                 "--seeds", "0", "--num-tasks", "1", "--observations", "image",
+                 "--results-dir", str(out), "--reproduce-dir", str(tmp_path / "none")])
+    assert record.stat().st_mtime == mtime
+    summary = json.loads((out / "Planar-v0.json").read_text())
+    assert [p["env_steps"] for p in summary["sac"]["sac_image (90 steps)"]] == [60, 90]
+    assert list(summary["sac"])[:2] == ["sac_image (90 steps)", "sac_image (120 steps)"]
 
 
 def test_finished_sac_run_with_other_tasks_is_not_reused(tmp_path):
