@@ -57,8 +57,9 @@ __all__ = [
     "observations_for_states",
 ]
 
-FORMAT_VERSION = 1
-"""Version of the sampling protocol and file layout; part of every cache key."""
+FORMAT_VERSION = 2
+"""Version of the sampling protocol and file layout; part of every cache key (2: Planar
+obstacles block only their cores, ``PlanarParams.collision_clearance``)."""
 
 _ARRAYS = ("obs", "action", "next_obs", "state", "next_state")
 _CHUNK = 2048

@@ -28,13 +28,16 @@ class PlanarEnv(ImageControlEnv):
     ## Description
     The hidden state is the agent centre ``(x, y)`` (``x`` = image column, ``y`` = image
     row, one world unit per pixel), kept in ``[1.5, 38.5]`` so the agent disk (radius 1.5)
-    stays inside the world. Six obstacle disks of radius 2.5 sit at (20.5, 5.5),
-    (20.5, 13.5), (20.5, 27.5), (20.5, 35.5), (10.5, 20.5), (30.5, 20.5). The action is a
-    displacement; the move is collision-checked in closed form
+    stays inside the world. Six obstacles, drawn as disks of radius 2.5, sit at (20.5, 5.5),
+    (20.5, 13.5), (20.5, 27.5), (20.5, 35.5), (10.5, 20.5), (30.5, 20.5). As in the paper's
+    reference code, only their cores block: the agent centre may not come closer than
+    ``obstacle_clearance`` (default 1) to an obstacle centre, so the agent can pass over the
+    drawn rim (``obstacle_clearance=4.0`` makes the drawn disks solid, a harder variant; see
+    :class:`pcc_envs.physics.PlanarParams` for why the default follows the reference code).
+    The action is a displacement; the move is collision-checked in closed form
     (:func:`pcc_envs.physics.planar_move`): the target is clipped to the world (sliding
-    along walls), and if the straight path then touches an obstacle the agent stops at the
-    first contact point. The agent never overlaps an obstacle. There is no velocity; one
-    frame is Markovian.
+    along walls), and if the straight path then enters an obstacle core the agent stops at
+    the first contact point. There is no velocity; one frame is Markovian.
 
     ## Action Space
     ``Box(-1, 1, (2,), float32)``: the displacement is ``3 * action`` per axis.
@@ -57,7 +60,8 @@ class PlanarEnv(ImageControlEnv):
 
     ## Arguments
     ``noise_std`` (Gaussian noise added to the position, applied as a collision-checked
-    move), ``reward_type``, ``render_mode``.
+    move), ``reward_type``, ``render_mode``, ``obstacle_clearance`` (smallest distance between
+    the agent centre and an obstacle centre, default 1).
 
     >>> import gymnasium as gym
     >>> import pcc_envs  # noqa: F401
@@ -81,8 +85,9 @@ class PlanarEnv(ImageControlEnv):
         noise_std: float = 0.0,
         reward_type: str = "dense",
         render_mode: str | None = None,
+        obstacle_clearance: float = 1.0,
     ) -> None:
-        self.params = PlanarParams()
+        self.params = PlanarParams(collision_clearance=obstacle_clearance)
         self.view = PlanarView()
         self.action_scale = (self.params.max_step, self.params.max_step)
         self.state_low = np.full(2, self.params.low)

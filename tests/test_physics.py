@@ -126,13 +126,39 @@ def test_default_arm_torques_cannot_hold_the_arm_level():
 
 # --------------------------------------------------------------------------- planar
 PLANAR = PlanarParams()
+SOLID_PLANAR = PlanarParams(collision_clearance=4.0)
+BOTH_GEOMETRIES = pytest.mark.parametrize("params", [PLANAR, SOLID_PLANAR], ids=["cores", "solid"])
 
 
-def test_planar_stops_at_the_first_contact():
-    end = planar_move(np.array([15.5, 20.5]), np.array([-3.0, 0.0]), PLANAR)
-    np.testing.assert_allclose(end, [10.5 + PLANAR.clearance, 20.5], atol=1e-9)
-    batch = planar_move(np.array([[15.5, 20.5]]), np.array([[-3.0, 0.0]]), PLANAR)
+@BOTH_GEOMETRIES
+def test_planar_stops_at_the_first_contact(params):
+    end = planar_move(np.array([16.5, 20.5]), np.array([-3.0, 0.0]), params)
+    expected = max(16.5 - 3.0, 10.5 + params.clearance)
+    np.testing.assert_allclose(end, [expected, 20.5], atol=1e-9)
+    batch = planar_move(np.array([[16.5, 20.5]]), np.array([[-3.0, 0.0]]), params)
     np.testing.assert_array_equal(batch[0], end)
+    start = np.array([10.5 + params.clearance + 0.5, 20.5])
+    np.testing.assert_allclose(planar_move(start, np.array([-3.0, 0.0]), params),
+                               [10.5 + params.clearance, 20.5], atol=1e-9)
+
+
+def test_planar_obstacles_block_only_their_cores_by_default():
+    # Along the bottom edge from the start corner (3, 37): the drawn disk at (20.5, 35.5)
+    # reaches down to y = 38, but only a solid obstacle stops the agent.
+    position = np.array([3.0, 37.0])
+    for _ in range(12):
+        position = planar_move(position, np.array([3.0, 0.0]), PLANAR)
+    np.testing.assert_allclose(position, [38.5, 37.0])
+    blocked = np.array([3.0, 37.0])
+    for _ in range(12):
+        blocked = planar_move(blocked, np.array([3.0, 0.0]), SOLID_PLANAR)
+    assert blocked[0] < 20.5
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf")])
+def test_planar_rejects_a_bad_clearance(bad):
+    with pytest.raises(ValueError, match="collision_clearance"):
+        PlanarParams(collision_clearance=bad)
 
 
 def test_planar_clips_to_the_world():
@@ -140,28 +166,30 @@ def test_planar_clips_to_the_world():
     np.testing.assert_allclose(end, [1.5, 30.0])
 
 
+@BOTH_GEOMETRIES
 @settings(max_examples=60, deadline=None)
 @given(
     start=st.tuples(st.floats(1.5, 38.5), st.floats(1.5, 38.5)),
     moves=st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3)), min_size=1, max_size=30),
 )
-def test_planar_never_enters_an_obstacle(start, moves):
+def test_planar_never_enters_an_obstacle(params, start, moves):
     position = np.array(start)
-    if planar_in_collision(position, PLANAR):
+    if planar_in_collision(position, params):
         return
     for move in moves:
-        position = planar_move(position, np.array(move), PLANAR)
-        assert not planar_in_collision(position, PLANAR)
-        assert np.all(position >= PLANAR.low) and np.all(position <= PLANAR.high)
+        position = planar_move(position, np.array(move), params)
+        assert not planar_in_collision(position, params)
+        assert np.all(position >= params.low) and np.all(position <= params.high)
 
 
-def test_planar_batched_random_walk_never_enters_an_obstacle():
+@BOTH_GEOMETRIES
+def test_planar_batched_random_walk_never_enters_an_obstacle(params):
     rng = np.random.default_rng(5)
-    pos = rng.uniform(PLANAR.low, PLANAR.high, (4000, 2))
-    pos = pos[~planar_in_collision(pos, PLANAR)]
+    pos = rng.uniform(params.low, params.high, (4000, 2))
+    pos = pos[~planar_in_collision(pos, params)]
     for _ in range(40):
-        pos = planar_move(pos, rng.uniform(-3, 3, pos.shape), PLANAR)
-        assert not planar_in_collision(pos, PLANAR).any()
+        pos = planar_move(pos, rng.uniform(-3, 3, pos.shape), params)
+        assert not planar_in_collision(pos, params).any()
 
 
 # --------------------------------------------------------------------------- rendering
