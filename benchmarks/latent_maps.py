@@ -4,9 +4,8 @@ The grid draws the maps of its first two models per method as it trains; this dr
 any saved agent afterwards (the best model, a failed one), one PNG per checkpoint, named
 after the checkpoint file.
 
-Usage:
-    python -m benchmarks.latent_maps \
-        benchmarks/results/reproduce/checkpoints/runs/paper-fast/pcc_Planar-v0/noise0.0/pcc/seed3.pt \
+Usage (``C=benchmarks/results/reproduce/checkpoints/runs/paper-fast/pcc_Planar-v0/noise0.0``):
+    python -m benchmarks.latent_maps $C/pcc/seed3.pt $C/pcc/seed6.pt \
         --out benchmarks/results/reproduce/latent_maps/paper-fast --prefix Planar-v0_pcc_noise0.0_
 """
 
