@@ -90,8 +90,9 @@ class ReproducePreset:
 REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
     # About ten minutes on 2 CPU cores: the README's one-command demo of the whole pipeline.
     # The paper's networks with the fast-forming training recipe (the "fast" variant), stopped
-    # after 100 epochs: enough for a usable Planar latent space, far from converged (see
-    # docs/training.md). It shows the pipeline, not the paper's numbers.
+    # after 100 epochs: far from converged (see docs/training.md; with package 0.2.0 both
+    # quick models scored 0% in goal, the oracle 75%). It shows the pipeline, not the paper's
+    # numbers; the Planar models that control well train 290-500 epochs.
     "quick": ReproducePreset(
         name="quick",
         envs=("pcc/Planar-v0",),

@@ -213,7 +213,7 @@ def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, 
     curves: dict[str, Any] = {}
     run_dir = results_dir / "runs" / env_id.replace("/", "_")
     budget_dirs = sorted(
-        run_dir.glob("sac_*/budget*") if run_dir.exists() else [],
+        run_dir.glob("sac_*/budget[0-9]*") if run_dir.exists() else [],
         key=lambda d: (d.parent.name, int(d.name.removeprefix("budget"))),
     )
     for sub in budget_dirs:
