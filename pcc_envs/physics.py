@@ -416,8 +416,10 @@ class PlanarParams:
 
 
 def planar_in_collision(position: np.ndarray, params: PlanarParams) -> np.ndarray:
-    """Whether the agent centre at ``position`` (..., 2) is closer than ``clearance`` to an
-    obstacle centre (open disks)."""
+    """Whether the agent centre at ``position`` (..., 2) is inside an obstacle's collision disk.
+
+    A collision disk is the open disk of radius ``params.clearance`` around an obstacle centre.
+    """
     centres = np.asarray(params.obstacles)
     dist2 = np.sum((position[..., None, :] - centres) ** 2, axis=-1)
     return np.any(dist2 < params.clearance**2, axis=-1)
