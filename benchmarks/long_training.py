@@ -96,7 +96,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             agent.save(Path(tmp) / "agent.pt")  # the weights as they are now, not the best
             snapshot = PCCAgent.load(Path(tmp) / "agent.pt")
         evaluation = evaluate_control(snapshot, args.env, seeds, record_states=False)
-        agent.model.train()
         row = {
             "epoch": epoch,
             "train_seconds": round(time.perf_counter() - start, 1),

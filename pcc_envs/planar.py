@@ -85,7 +85,7 @@ class PlanarEnv(ImageControlEnv):
         noise_std: float = 0.0,
         reward_type: str = "dense",
         render_mode: str | None = None,
-        obstacle_clearance: float = 1.0,
+        obstacle_clearance: float = PlanarParams.collision_clearance,
     ) -> None:
         self.params = PlanarParams(collision_clearance=obstacle_clearance)
         self.view = PlanarView()
