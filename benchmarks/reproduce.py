@@ -54,6 +54,7 @@ class RunSpec:
     preset: str
     num_samples: int | None = None
     max_epochs: int | None = None
+    patience: int | None = None
 
     @property
     def relative_path(self) -> Path:
@@ -110,11 +111,20 @@ def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any]
         return None
     if record.get("format") != RESULT_FORMAT or record.get("status") != "done":
         return None
-    if spec is not None and record.get("spec") != asdict(spec):
+    if spec is not None and not _same_spec(record.get("spec"), spec):
         return None
     if spec is not None and not _same_planner(record, spec):
         return None
     return record
+
+
+def _same_spec(stored: Any, spec: RunSpec) -> bool:
+    """Whether a record's spec is ``spec``; overrides added later (absent) count as unset."""
+    if not isinstance(stored, dict):
+        return False
+    expected = asdict(spec)
+    unset = {key: None for key, value in expected.items() if value is None}
+    return {**unset, **stored} == expected
 
 
 def _preset_for(spec: RunSpec) -> Any:
@@ -124,6 +134,8 @@ def _preset_for(spec: RunSpec) -> Any:
     preset = get_preset(spec.env_id, spec.model_variant)
     if spec.max_epochs is not None:
         preset = replace(preset, train=replace(preset.train, epochs=spec.max_epochs))
+    if spec.patience is not None:
+        preset = replace(preset, train=replace(preset.train, patience=spec.patience))
     if spec.num_samples is not None:
         preset = replace(preset, data=replace(preset.data, num_samples=spec.num_samples))
     return preset
@@ -293,6 +305,7 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[Ru
                             seed=seed,
                             num_samples=preset.num_samples.get(env_id),
                             max_epochs=preset.max_epochs,
+                            patience=preset.patience,
                             **common,
                         )
                     )
@@ -655,6 +668,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--num-tasks", type=int, help="Override the number of tasks per model.")
     parser.add_argument("--max-epochs", type=int, help="Override the training epoch cap.")
+    parser.add_argument(
+        "--patience", type=int,
+        help="Override the early-stopping patience (epochs without validation improvement).",
+    )
     parser.add_argument("--noise", type=float, nargs="+", help="Override the noise levels.")
     parser.add_argument("--no-oracle", action="store_true", help="Skip the oracle ceiling.")
     parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
@@ -700,6 +717,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["num_tasks"] = args.num_tasks
         if args.max_epochs is not None:
             changes["max_epochs"] = args.max_epochs
+        if args.patience is not None:
+            if args.patience < 0:
+                raise SystemExit(f"--patience must be >= 0, got {args.patience}.")
+            changes["patience"] = args.patience
         if args.noise:
             changes["noise_levels"] = tuple(args.noise)
         preset = preset.replace(**changes)

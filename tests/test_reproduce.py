@@ -136,6 +136,12 @@ def test_record_of_other_settings_is_stale(tmp_path):
     # Same file path, but --num-tasks / --max-epochs changed: the old record must not count.
     assert load_finished_run(path, dataclasses.replace(spec, num_tasks=5)) is None
     assert load_finished_run(path, dataclasses.replace(spec, max_epochs=3)) is None
+    assert load_finished_run(path, dataclasses.replace(spec, patience=100)) is None
+    # A record written before an override existed (key absent) matches a spec leaving it unset.
+    older = {key: value for key, value in record["spec"].items() if key != "patience"}
+    path.write_text(json.dumps({**record, "spec": older}))
+    assert load_finished_run(path, spec) is not None
+    assert load_finished_run(path, dataclasses.replace(spec, patience=100)) is None
 
 
 def test_run_with_old_planner_settings_is_reevaluated_not_retrained(tmp_path):
@@ -163,3 +169,16 @@ def test_explicit_model_seeds_select_the_grid_cells():
     assert sorted((r.method, r.seed) for r in runs) == [("e2c", 3), ("e2c", 7), ("pcc", 3),
                                                          ("pcc", 7)]
     assert {r.seed for r in expand_grid(preset.replace(model_seeds=None), False)} == set(range(10))
+
+
+def test_training_overrides_reach_the_trained_model(tmp_path):
+    from benchmarks.presets import REPRODUCE_PRESETS
+    from benchmarks.reproduce import expand_grid
+
+    long = REPRODUCE_PRESETS["paper-fast-long"].replace(envs=("pcc/Planar-v0",), methods=("pcc",))
+    assert {(r.max_epochs, r.patience) for r in expand_grid(long, False)} == {(1000, 100)}
+    spec = dataclasses.replace(tiny_spec(), patience=7, max_epochs=2)
+    record = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    train = record["config"]["train"]
+    assert (train["patience"], train["epochs"]) == (7, 2)
+    assert record["spec"]["patience"] == 7
