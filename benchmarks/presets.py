@@ -89,6 +89,15 @@ class ReproducePreset:
         return dataclasses.asdict(self)
 
 
+_PAPER_FAST = ReproducePreset(
+    name="paper-fast",
+    envs=ALL_ENVS,
+    methods=ALL_METHODS,
+    num_models=10,
+    num_tasks=10,
+    model_variant="fast",
+)
+
 REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
     # About ten minutes on 2 CPU cores: the README's one-command demo of the whole pipeline.
     # The paper's networks with the fast-forming training recipe (the "fast" variant), stopped
@@ -114,28 +123,13 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
         model_variant="paper",
     ),
     # The same protocol with the CPU-friendly CNNs for CartPole, the arms and LaneKeeping.
-    "paper-fast": ReproducePreset(
-        name="paper-fast",
-        envs=ALL_ENVS,
-        methods=ALL_METHODS,
-        num_models=10,
-        num_tasks=10,
-        model_variant="fast",
-    ),
+    "paper-fast": _PAPER_FAST,
     # "paper-fast" with a longer early-stopping criterion: 100 epochs without improvement, at
     # most 1,000 epochs. On Planar the models whose latent map unfolds keep improving after
     # epoch 300, while patience 30 stopped half of them at epochs 128-208 (docs/training.md).
     # The best-validation weights are kept, so this can only lower a model's validation loss.
-    "paper-fast-long": ReproducePreset(
-        name="paper-fast-long",
-        envs=ALL_ENVS,
-        methods=ALL_METHODS,
-        num_models=10,
-        num_tasks=10,
-        model_variant="fast",
-        max_epochs=1000,
-        patience=100,
-    ),
+    "paper-fast-long": _PAPER_FAST.replace(name="paper-fast-long", max_epochs=1000,
+                                           patience=100),
     # Table 3: noisy dynamics.
     "paper-noisy": ReproducePreset(
         name="paper-noisy",
