@@ -619,34 +619,78 @@ def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def estimate_seconds(runs: Sequence[RunSpec]) -> float:
-    """Rough cost (one CPU core per run): measured seconds per epoch x the epoch cap.
+@dataclass(frozen=True)
+class CostEstimate:
+    """Compute time of a grid, in CPU-core seconds (divide by the workers for wall time)."""
 
-    Seconds per epoch come from ``benchmarks/results/train_speed.json`` (this machine's
-    measurements, 1 thread) where it has the (env, method, variant), otherwise from a
-    conservative per-sample guess. Early stopping can make a run shorter.
-    """
+    expected_seconds: float
+    upper_seconds: float
+    runs_from_records: int  # how many runs took their figure from finished runs of their kind
+
+
+def _cost_key(spec: RunSpec, with_method: bool = True) -> tuple[Any, ...]:
+    """Runs with the same key train the same kind of model for the same epoch budget."""
+    budget = (spec.env_id, spec.model_variant, spec.num_samples, spec.max_epochs, spec.patience)
+    return (*budget, spec.method) if with_method else budget
+
+
+def _cap_seconds(spec: RunSpec, measured: dict[tuple[str, str, str], float]) -> float:
+    """Seconds for one run that trains to its epoch cap (early stopping makes it shorter)."""
     from pcc_agent.presets import get_preset
 
+    if spec.method == ORACLE:
+        return 300.0
+    preset = get_preset(spec.env_id, spec.model_variant)
+    samples = spec.num_samples or preset.data.num_samples
+    epochs = spec.max_epochs or preset.train.epochs
+    cnn = preset.model.encoder_kind == "cnn"
+    guess = 0.1 if cnn and spec.model_variant == "paper" else (2e-3 if cnn else 7e-4)
+    per_sample = measured.get((spec.env_id, spec.method, spec.model_variant), guess)
+    return per_sample * samples * epochs
+
+
+def estimate_cost(
+    runs: Sequence[RunSpec], finished: Iterable[dict[str, Any]] = ()
+) -> CostEstimate:
+    """Cost of ``runs`` (one CPU core per run).
+
+    The upper bound trains every model to its epoch cap at the seconds per epoch measured in
+    ``benchmarks/results/train_speed.json`` (1 thread), or a conservative per-sample guess.
+    The expected figure uses, where there are any, the median time (training plus control)
+    of ``finished`` run records of the same kind (env, method, variant, data size, epoch cap,
+    patience), else of the other methods' models of that kind: early stopping usually ends a
+    run long before the cap.
+    """
     measured: dict[tuple[str, str, str], float] = {}
     speed_file = Path(__file__).resolve().parent / "results" / "train_speed.json"
     if speed_file.exists():
         for row in json.loads(speed_file.read_text()):
             per_sample = row["seconds_per_epoch"] / row["num_samples"]
             measured[(row["env"], row["method"], row["variant"])] = per_sample
-    total = 0.0
-    for r in runs:
-        if r.method == ORACLE:
-            total += 300.0
+    observed: dict[tuple[Any, ...], list[float]] = {}
+    for rec in finished:
+        try:
+            spec = RunSpec(**rec["spec"])
+            seconds = float(rec["train_seconds"]) + float(rec.get("eval_seconds", 0.0))
+        except (KeyError, TypeError, ValueError):  # an older or hand-made record
             continue
-        preset = get_preset(r.env_id, r.model_variant)
-        samples = r.num_samples or preset.data.num_samples
-        epochs = r.max_epochs or preset.train.epochs
-        cnn = preset.model.encoder_kind == "cnn"
-        guess = 0.1 if cnn and r.model_variant == "paper" else (2e-3 if cnn else 7e-4)
-        per_sample = measured.get((r.env_id, r.method, r.model_variant), guess)
-        total += per_sample * samples * epochs
-    return total
+        observed.setdefault(_cost_key(spec), []).append(seconds)
+        if spec.method != ORACLE:
+            observed.setdefault(_cost_key(spec, with_method=False), []).append(seconds)
+    expected = upper = 0.0
+    from_records = 0
+    for spec in runs:
+        cap = _cap_seconds(spec, measured)
+        upper += cap
+        seen = observed.get(_cost_key(spec))
+        if not seen and spec.method != ORACLE:
+            seen = observed.get(_cost_key(spec, with_method=False))
+        if seen:
+            expected += float(np.median(seen))
+            from_records += 1
+        else:
+            expected += cap
+    return CostEstimate(expected, upper, from_records)
 
 
 # ---------------------------------------------------------------------------- command line
@@ -725,10 +769,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["noise_levels"] = tuple(args.noise)
         preset = preset.replace(**changes)
         runs = expand_grid(preset, include_oracle=not args.no_oracle)
-        hours = estimate_seconds(runs) / 3600 / max(1, args.workers)
+        pending = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
+        cost = estimate_cost(pending, load_records(results_dir) if pending else ())
+        workers = max(1, args.workers)
         print(
-            f"Preset {preset.name!r}: {len(runs)} runs, estimated {hours:.1f} h on "
-            f"{args.workers} CPU worker(s) (rough; CNN 'paper' models want a GPU)."
+            f"Preset {preset.name!r}: {len(runs)} runs, {len(pending)} to run, estimated "
+            f"{cost.expected_seconds / 3600 / workers:.1f} h on {args.workers} CPU worker(s) "
+            f"({cost.runs_from_records} of {len(pending)} from finished runs of the same kind; "
+            f"at most {cost.upper_seconds / 3600 / workers:.1f} h if every model trains to its "
+            "epoch cap; CNN 'paper' models want a GPU)."
         )
         run_grid(runs, results_dir, args.workers, args.backend, args.ray_address, args.data_dir)
     write_summary(results_dir)

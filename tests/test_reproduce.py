@@ -13,6 +13,7 @@ import numpy as np
 from benchmarks.reproduce import (
     RunSpec,
     aggregate,
+    estimate_cost,
     execute_run,
     interquartile_mean,
     load_finished_run,
@@ -182,3 +183,24 @@ def test_training_overrides_reach_the_trained_model(tmp_path):
     train = record["config"]["train"]
     assert (train["patience"], train["epochs"]) == (7, 2)
     assert record["spec"]["patience"] == 7
+
+
+def test_cost_estimate_uses_finished_runs_of_the_same_kind():
+    pcc, rce, e2c = (dataclasses.replace(tiny_spec(9), method=m) for m in ("pcc", "rce", "e2c"))
+    finished = [
+        {"spec": dataclasses.asdict(dataclasses.replace(pcc, seed=s)), "train_seconds": t,
+         "eval_seconds": 1.0}
+        for s, t in [(0, 10.0), (1, 30.0), (2, 1000.0)]
+    ] + [{"spec": dataclasses.asdict(rce), "train_seconds": 4.0, "eval_seconds": 0.0}]
+    nothing_known = estimate_cost([pcc])
+    assert nothing_known.runs_from_records == 0
+    assert nothing_known.expected_seconds == nothing_known.upper_seconds > 0
+    # pcc: median of its own kind (31 s); rce: its own record; e2c: median over all methods.
+    cost = estimate_cost([pcc, rce, e2c], finished)
+    assert cost.runs_from_records == 3
+    assert np.isclose(cost.expected_seconds, 31.0 + 4.0 + np.median([11, 31, 1001, 4]))
+    caps = [estimate_cost([spec]).upper_seconds for spec in (pcc, rce, e2c)]
+    assert np.isclose(cost.upper_seconds, sum(caps))
+    # Another epoch budget is another kind: no record applies.
+    longer = dataclasses.replace(pcc, max_epochs=2)
+    assert estimate_cost([longer], finished).runs_from_records == 0
