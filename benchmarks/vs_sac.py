@@ -7,10 +7,15 @@ the same function, task seeds and metric (percentage of steps in goal) as the re
 pipeline. The PCC / E2C / RCE points (at their data-set sizes) and the oracle ceiling are
 read from the reproduction pipeline's run files for the same env and task seeds.
 
-Every (env, policy, budget, seed) run writes one JSON file,
-``runs/<env>/sac_<observation>/budget<steps>/seed<seed>.json`` (resumable: finished runs are
-skipped). Runs with different budgets are different agents (SAC's ``learning_starts`` and
-buffer depend on the budget), so each budget has its own learning curve in the outputs.
+Every (env, policy, reward, budget, seed) run writes one JSON file,
+``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json`` (resumable: finished
+runs are skipped). Runs with different budgets are different agents (SAC's ``learning_starts``
+and buffer depend on the budget), so each budget has its own learning curve in the outputs.
+
+Reward: SAC learns from the env's reward, the model-based methods from none (their planner
+has the paper's quadratic latent cost). ``--reward dense`` (default) is the env's negative
+weighted squared distance to the goal; ``--reward sparse`` pays 1 per step in the goal region,
+i.e. the metric itself. Both are scored by the same metric.
 
 Replay buffer: one transition of an 80x80x2 observation costs 2 x 12.8 kB (obs and next obs,
 uint8), so the default buffer of 100,000 transitions takes about 2.6 GB; 40x40 and 48x48
@@ -59,20 +64,31 @@ class TrueStateObservation(gym.ObservationWrapper):
         return self.env.unwrapped.state.astype(np.float32)
 
 
-def make_env(env_id: str, observation: str) -> gym.Env:
-    """The env as SAC sees it: images (``"image"``) or the true state (``"state"``)."""
+REWARDS = ("dense", "sparse")
+
+
+def make_env(env_id: str, observation: str, reward: str = "dense") -> gym.Env:
+    """The env as SAC sees it: images (``"image"``) or the true state (``"state"``).
+
+    ``reward`` is the env's ``reward_type`` SAC trains on (``"dense"`` or ``"sparse"``).
+    """
     import pcc_envs  # noqa: F401
 
-    env = gym.make(env_id)
+    env = gym.make(env_id, reward_type=reward)
     return TrueStateObservation(env) if observation == "state" else env
 
 
 def load_finished_sac_run(
-    path: Path, steps: int, checkpoints: Sequence[int], task_seed_list: Sequence[int]
+    path: Path,
+    steps: int,
+    checkpoints: Sequence[int],
+    task_seed_list: Sequence[int],
+    reward: str = "dense",
 ) -> dict[str, Any] | None:
     """A finished run's record, or None if it is missing or stale.
 
-    Stale: made with other steps, checkpoints or task seeds (not the curve asked for).
+    Stale: made with other steps, checkpoints, task seeds or reward (not the curve asked
+    for). Records without a ``reward`` key were trained on the dense reward.
     """
     if not path.exists():
         return None
@@ -82,18 +98,22 @@ def load_finished_sac_run(
         or record.get("steps") != steps
         or [p["env_steps"] for p in record.get("curve", [])] != list(checkpoints)
         or record.get("task_seeds") != list(task_seed_list)
+        or record.get("reward", "dense") != reward
     ):
         return None
     return record
 
 
-def sac_run_path(results_dir: Path, env_id: str, observation: str, steps: int, seed: int) -> Path:
-    """Where the record of one SAC run (env, observation kind, step budget, seed) lives."""
+def sac_run_path(
+    results_dir: Path, env_id: str, observation: str, steps: int, seed: int, reward: str = "dense"
+) -> Path:
+    """Where the record of one SAC run (env, observation, reward, step budget, seed) lives."""
+    suffix = "" if reward == "dense" else f"_{reward}"
     return (
         results_dir
         / "runs"
         / env_id.replace("/", "_")
-        / f"sac_{observation}"
+        / f"sac_{observation}{suffix}"
         / f"budget{steps}"
         / f"seed{seed}.json"
     )
@@ -108,6 +128,7 @@ def run_sac(
     task_seed_list: Sequence[int],
     buffer_size: int,
     results_dir: Path,
+    reward: str = "dense",
 ) -> dict[str, Any]:
     """Train one SAC agent, evaluating it at every checkpoint; write and return its record."""
     import torch
@@ -116,13 +137,15 @@ def run_sac(
 
     from pcc_agent.evaluation import evaluate_control
 
-    path = sac_run_path(results_dir, env_id, observation, steps, seed)
+    if reward not in REWARDS:
+        raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
+    path = sac_run_path(results_dir, env_id, observation, steps, seed, reward)
     wanted = sorted({c for c in checkpoints if c <= steps} | {steps})
-    record = load_finished_sac_run(path, steps, wanted, task_seed_list)
+    record = load_finished_sac_run(path, steps, wanted, task_seed_list, reward)
     if record is not None:
         return record
     policy = "CnnPolicy" if observation == "image" else "MlpPolicy"
-    env = make_env(env_id, observation)
+    env = make_env(env_id, observation, reward)
     model = SAC(
         policy,
         env,
@@ -169,6 +192,7 @@ def run_sac(
         "env_id": env_id,
         "policy": f"SAC {policy} ({observation})",
         "observation": observation,
+        "reward": reward,
         "seed": seed,
         "steps": steps,
         "buffer_size": min(buffer_size, steps),
@@ -208,7 +232,8 @@ def _se(x: np.ndarray) -> float:
 def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, Any]:
     """Learning curves (mean and SE over seeds) and the model-based points, as one dict.
 
-    One curve per policy and step budget, keyed ``"sac_<observation> (<steps> steps)"``.
+    One curve per policy, reward and step budget, keyed
+    ``"sac_<observation>[_sparse] (<steps> steps)"``.
     """
     curves: dict[str, Any] = {}
     run_dir = results_dir / "runs" / env_id.replace("/", "_")
@@ -331,6 +356,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--observations", nargs="+", default=["image", "state"], choices=["image", "state"]
     )
+    parser.add_argument(
+        "--reward",
+        default="dense",
+        choices=REWARDS,
+        help="The env reward SAC trains on: 'dense' (negative weighted squared distance to "
+        "the goal) or 'sparse' (1 per step in the goal region, the metric itself).",
+    )
     parser.add_argument("--num-tasks", type=int, default=REPRODUCE_PRESETS["paper"].num_tasks)
     parser.add_argument("--buffer-size", type=int, default=100_000)
     parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
@@ -371,6 +403,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     seeds,
                     args.buffer_size,
                     args.results_dir,
+                    args.reward,
                 )
     write_outputs(summarize(args.env, args.results_dir, args.reproduce_dir), args.results_dir)
     return 0

@@ -48,6 +48,25 @@ def test_finished_sac_run_with_other_tasks_is_not_reused(tmp_path):
     assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2, 3]) is None
     assert vs_sac.load_finished_sac_run(path, 120, [30, 60, 120], [1, 2]) is None
     assert vs_sac.load_finished_sac_run(path, 200, [60, 200], [1, 2]) is None
+    # A record without a reward key was trained on the dense reward.
+    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2], "sparse") is None
+
+
+def test_sparse_reward_is_its_own_agent_and_curve(tmp_path):
+    out = tmp_path / "vs_sac"
+    args = ["--env", "pcc/Planar-v0", "--steps", "60", "--checkpoints", "60", "--seeds", "0",
+            "--num-tasks", "1", "--observations", "state", "--threads", "1",
+            "--results-dir", str(out), "--reproduce-dir", str(tmp_path / "none")]
+    vs_sac.main([*args, "--reward", "sparse"])
+    path = vs_sac.sac_run_path(out, "pcc/Planar-v0", "state", 60, 0, "sparse")
+    assert json.loads(path.read_text())["reward"] == "sparse"
+    assert not vs_sac.sac_run_path(out, "pcc/Planar-v0", "state", 60, 0).exists()
+    env = vs_sac.make_env("pcc/Planar-v0", "state", "sparse")
+    env.reset(seed=0)
+    _, reward, *_ = env.step(env.action_space.sample())
+    assert reward in (0.0, 1.0)
+    summary = json.loads((out / "Planar-v0.json").read_text())
+    assert list(summary["sac"]) == ["sac_state_sparse (60 steps)"]
 
 
 def test_model_based_points_are_per_preset(tmp_path):
