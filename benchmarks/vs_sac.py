@@ -282,6 +282,14 @@ def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, 
     return {"env": env_id, "sac": curves, "model_based": model_based}
 
 
+def _curve_label(key: str) -> str:
+    """``"sac_image_sparse (20000 steps)"`` -> ``"SAC image, sparse reward, budget 20000"``."""
+    name, steps = key.split(" (")
+    parts = name.split("_")
+    reward = parts[2] if len(parts) > 2 else "dense"
+    return f"SAC {parts[1]}, {reward} reward, budget {steps.removesuffix(' steps)')}"
+
+
 def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
     """JSON, Markdown table and learning-curve PNG for one env."""
     import matplotlib
@@ -309,30 +317,34 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
                 f"| {p['n_seeds']} seeds |"
             )
     (results_dir / f"{name}.md").write_text("\n".join(lines) + "\n")
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(9, 4.5))
     for policy, curve in summary["sac"].items():
         x = [p["env_steps"] for p in curve]
         y = np.array([p["mean"] for p in curve])
         e = np.array([p["se"] for p in curve])
-        ax.plot(x, y, marker="o", label=policy.replace("_", " "))
+        ax.plot(x, y, marker="o", label=_curve_label(policy))
         ax.fill_between(x, y - e, y + e, alpha=0.2)
-    for label, entry in sorted(summary["model_based"].items()):
-        if entry["method"] == ORACLE:
-            ax.axhline(entry["mean"], color="k", linestyle="--", label="oracle (true dynamics)")
-        elif entry["num_samples"]:
-            ax.errorbar(
-                entry["num_samples"],
-                entry["mean"],
-                yerr=entry["se"],
-                fmt="s",
-                capsize=3,
-                label=label,
-            )
+    model_based = sorted(summary["model_based"].items())
+    oracles = [entry for _, entry in model_based if entry["method"] == ORACLE]
+    if oracles:  # one ceiling, whatever preset evaluated it
+        ax.axhline(oracles[0]["mean"], color="k", linestyle="--", label="oracle (true dynamics)")
+    points = [(k, e) for k, e in model_based if e["method"] != ORACLE and e["num_samples"]]
+    # Points share the data-set size: spread them a little along the log axis to keep them apart.
+    for i, (label, entry) in enumerate(points):
+        dodge = 1.0 + 0.04 * (i - (len(points) - 1) / 2)
+        ax.errorbar(
+            entry["num_samples"] * dodge,
+            entry["mean"],
+            yerr=entry["se"],
+            fmt="s",
+            capsize=3,
+            label=f"{label}, {entry['n_tasks']} tasks",
+        )
     ax.set_xscale("log")
     ax.set_xlabel("environment samples")
     ax.set_ylabel("% of steps in goal")
     ax.set_title(f"{summary['env']}: SAC vs embed-to-control")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
     fig.savefig(results_dir / f"{name}.png", dpi=120)
     plt.close(fig)
