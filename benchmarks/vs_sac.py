@@ -13,9 +13,12 @@ runs are skipped). Runs with different budgets are different agents (SAC's ``lea
 and buffer depend on the budget), so each budget has its own learning curve in the outputs.
 
 Reward: SAC learns from the env's reward, the model-based methods from none (their planner
-has the paper's quadratic latent cost). ``--reward dense`` (default) is the env's negative
-weighted squared distance to the goal; ``--reward sparse`` pays 1 per step in the goal region,
-i.e. the metric itself. Both are scored by the same metric.
+has the paper's quadratic latent cost). ``--reward sparse`` (default) pays 1 per step in the
+goal region, i.e. the metric itself; ``--reward dense`` is the env's negative weighted squared
+distance to the goal. Both are scored by the same metric. The default is the stronger
+baseline: on Planar's true state, SAC reached 71% of steps in goal after 20,000 steps with
+the sparse reward and 3% with the dense one, whose gradient near the 2-pixel goal is too flat
+to tell hovering beside the goal from sitting in it.
 
 Replay buffer: one transition of an 80x80x2 observation costs 2 x 12.8 kB (obs and next obs,
 uint8), so the default buffer of 100,000 transitions takes about 2.6 GB; 40x40 and 48x48
@@ -67,7 +70,7 @@ class TrueStateObservation(gym.ObservationWrapper):
 REWARDS = ("dense", "sparse")
 
 
-def make_env(env_id: str, observation: str, reward: str = "dense") -> gym.Env:
+def make_env(env_id: str, observation: str, reward: str) -> gym.Env:
     """The env as SAC sees it: images (``"image"``) or the true state (``"state"``).
 
     ``reward`` is the env's ``reward_type`` SAC trains on (``"dense"`` or ``"sparse"``).
@@ -83,7 +86,7 @@ def load_finished_sac_run(
     steps: int,
     checkpoints: Sequence[int],
     task_seed_list: Sequence[int],
-    reward: str = "dense",
+    reward: str,
 ) -> dict[str, Any] | None:
     """A finished run's record, or None if it is missing or stale.
 
@@ -105,7 +108,7 @@ def load_finished_sac_run(
 
 
 def sac_run_path(
-    results_dir: Path, env_id: str, observation: str, steps: int, seed: int, reward: str = "dense"
+    results_dir: Path, env_id: str, observation: str, steps: int, seed: int, reward: str
 ) -> Path:
     """Where the record of one SAC run (env, observation, reward, step budget, seed) lives."""
     suffix = "" if reward == "dense" else f"_{reward}"
@@ -128,7 +131,7 @@ def run_sac(
     task_seed_list: Sequence[int],
     buffer_size: int,
     results_dir: Path,
-    reward: str = "dense",
+    reward: str,
 ) -> dict[str, Any]:
     """Train one SAC agent, evaluating it at every checkpoint; write and return its record."""
     import torch
@@ -370,7 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--reward",
-        default="dense",
+        default="sparse",
         choices=REWARDS,
         help="The env reward SAC trains on: 'dense' (negative weighted squared distance to "
         "the goal) or 'sparse' (1 per step in the goal region, the metric itself).",

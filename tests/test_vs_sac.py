@@ -16,13 +16,13 @@ def test_vs_sac_tiny_budget(tmp_path):
     ])
     assert code == 0
     summary = json.loads((out / "Planar-v0.json").read_text())
-    for policy in ("sac_image (120 steps)", "sac_state (120 steps)"):
+    for policy in ("sac_image_sparse (120 steps)", "sac_state_sparse (120 steps)"):
         curve = summary["sac"][policy]
         assert [p["env_steps"] for p in curve] == [60, 120]
         assert all(0.0 <= p["mean"] <= 100.0 for p in curve)
     assert (out / "Planar-v0.png").exists() and (out / "Planar-v0.md").exists()
     # Finished runs are reused, not retrained.
-    record = vs_sac.sac_run_path(out, "pcc/Planar-v0", "image", 120, 0)
+    record = vs_sac.sac_run_path(out, "pcc/Planar-v0", "image", 120, 0, "sparse")
     assert record.exists()
     mtime = record.stat().st_mtime
     vs_sac.main(["--env", "pcc/Planar-v0", "--steps", "120", "--checkpoints", "60",
@@ -35,8 +35,9 @@ def test_vs_sac_tiny_budget(tmp_path):
                  "--results-dir", str(out), "--reproduce-dir", str(tmp_path / "none")])
     assert record.stat().st_mtime == mtime
     summary = json.loads((out / "Planar-v0.json").read_text())
-    assert [p["env_steps"] for p in summary["sac"]["sac_image (90 steps)"]] == [60, 90]
-    assert list(summary["sac"])[:2] == ["sac_image (90 steps)", "sac_image (120 steps)"]
+    assert [p["env_steps"] for p in summary["sac"]["sac_image_sparse (90 steps)"]] == [60, 90]
+    assert list(summary["sac"])[:2] == ["sac_image_sparse (90 steps)",
+                                        "sac_image_sparse (120 steps)"]
 
 
 def test_finished_sac_run_with_other_tasks_is_not_reused(tmp_path):
@@ -44,29 +45,30 @@ def test_finished_sac_run_with_other_tasks_is_not_reused(tmp_path):
     record = {"status": "done", "steps": 120, "curve": [{"env_steps": 60}, {"env_steps": 120}],
               "task_seeds": [1, 2]}
     path.write_text(json.dumps(record))
-    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2]) is not None
-    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2, 3]) is None
-    assert vs_sac.load_finished_sac_run(path, 120, [30, 60, 120], [1, 2]) is None
-    assert vs_sac.load_finished_sac_run(path, 200, [60, 200], [1, 2]) is None
+    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2], "dense") is not None
+    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2, 3], "dense") is None
+    assert vs_sac.load_finished_sac_run(path, 120, [30, 60, 120], [1, 2], "dense") is None
+    assert vs_sac.load_finished_sac_run(path, 200, [60, 200], [1, 2], "dense") is None
     # A record without a reward key was trained on the dense reward.
     assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2], "sparse") is None
 
 
-def test_sparse_reward_is_its_own_agent_and_curve(tmp_path):
+def test_dense_reward_is_its_own_agent_and_curve(tmp_path):
     out = tmp_path / "vs_sac"
     args = ["--env", "pcc/Planar-v0", "--steps", "60", "--checkpoints", "60", "--seeds", "0",
             "--num-tasks", "1", "--observations", "state", "--threads", "1",
             "--results-dir", str(out), "--reproduce-dir", str(tmp_path / "none")]
-    vs_sac.main([*args, "--reward", "sparse"])
-    path = vs_sac.sac_run_path(out, "pcc/Planar-v0", "state", 60, 0, "sparse")
-    assert json.loads(path.read_text())["reward"] == "sparse"
-    assert not vs_sac.sac_run_path(out, "pcc/Planar-v0", "state", 60, 0).exists()
-    env = vs_sac.make_env("pcc/Planar-v0", "state", "sparse")
-    env.reset(seed=0)
-    _, reward, *_ = env.step(env.action_space.sample())
-    assert reward in (0.0, 1.0)
+    vs_sac.main([*args, "--reward", "dense"])
+    path = vs_sac.sac_run_path(out, "pcc/Planar-v0", "state", 60, 0, "dense")
+    assert json.loads(path.read_text())["reward"] == "dense"
+    assert not vs_sac.sac_run_path(out, "pcc/Planar-v0", "state", 60, 0, "sparse").exists()
     summary = json.loads((out / "Planar-v0.json").read_text())
-    assert list(summary["sac"]) == ["sac_state_sparse (60 steps)"]
+    assert list(summary["sac"]) == ["sac_state (60 steps)"]
+    for reward_type, reward_ok in (("dense", lambda r: r < 0), ("sparse", lambda r: r in (0, 1))):
+        env = vs_sac.make_env("pcc/Planar-v0", "state", reward_type)
+        env.reset(seed=0)
+        _, reward, *_ = env.step(env.action_space.sample())
+        assert reward_ok(reward), (reward_type, reward)
 
 
 def test_model_based_points_are_per_preset(tmp_path):
