@@ -11,7 +11,15 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["PAPER_RESULTS", "REPRODUCE_PRESETS", "ReproducePreset", "ALL_METHODS", "ALL_ENVS"]
+__all__ = [
+    "ABLATIONS",
+    "ALL_ENVS",
+    "ALL_METHODS",
+    "LATENT_MAP_ENVS",
+    "PAPER_RESULTS",
+    "REPRODUCE_PRESETS",
+    "ReproducePreset",
+]
 
 ALL_ENVS: tuple[str, ...] = (
     "pcc/Planar-v0",
@@ -28,6 +36,12 @@ ALL_METHODS: tuple[str, ...] = (
     "pcc-no-curvature",
     "pcc-amortized",
 )
+#: The methods of the paper's Table 2 (PCC with one component removed or amortized).
+ABLATIONS: tuple[str, ...] = ("pcc-no-consistency", "pcc-no-curvature", "pcc-amortized")
+
+#: Envs whose first :data:`LATENT_MAP_MODELS` models get a latent map (the paper's Figure 2).
+LATENT_MAP_ENVS: tuple[str, ...] = ("pcc/Planar-v0", "pcc/PendulumSwingUp-v0")
+LATENT_MAP_MODELS = 2
 
 
 #: The task start distribution of every env (its ``reset`` without options), for the tables.
@@ -54,6 +68,8 @@ class ReproducePreset:
         num_tasks: Control tasks per model, start states drawn with :attr:`task_seed`.
         model_variant: ``"paper"`` (exact architectures) or ``"fast"`` (CPU-friendly CNNs).
         noise_levels: Process-noise standard deviations (0 = deterministic, Table 1).
+        env_noise_levels: Per-env replacements of :attr:`noise_levels` (Table 3 runs Planar
+            at two noise levels and the other domains at one).
         num_samples: Per-env data-set size overrides (default: the paper's sizes).
         max_epochs: Override of the training epoch cap (None: the env preset's).
         patience: Override of the early-stopping patience in epochs (None: the env preset's).
@@ -68,6 +84,7 @@ class ReproducePreset:
     num_tasks: int
     model_variant: str = "paper"
     noise_levels: tuple[float, ...] = (0.0,)
+    env_noise_levels: dict[str, tuple[float, ...]] = field(default_factory=dict)
     num_samples: dict[str, int] = field(default_factory=dict)
     max_epochs: int | None = None
     patience: int | None = None
@@ -80,13 +97,49 @@ class ReproducePreset:
             return self.model_seeds
         return tuple(range(self.num_models))
 
+    def noise_levels_for(self, env_id: str) -> tuple[float, ...]:
+        """The process-noise levels at which ``env_id`` is run."""
+        return self.env_noise_levels.get(env_id, self.noise_levels)
+
     def replace(self, **changes: Any) -> ReproducePreset:
-        """A copy with some fields changed (used by the command-line overrides)."""
+        """A copy with some fields changed, keeping the name."""
         return dataclasses.replace(self, **changes)
+
+    def override(self, **changes: Any) -> ReproducePreset:
+        """A copy with command-line overrides, renamed if they change what a run computes.
+
+        Overrides of :data:`RUN_FIELDS` (tasks, task seed, data sizes, epoch cap, patience)
+        make other models or other tasks than the preset's, so the copy is named
+        ``"<name>+<field>=<value>,..."``: its runs get their own files and table rows and
+        never mix with (or overwrite) the preset's. Grid selections (envs, methods, seeds,
+        noise levels) keep the name: each of their cells is a cell of the preset.
+        """
+        new = dataclasses.replace(self, **changes)
+        tags = [
+            f"{key}={_tag_value(getattr(new, key))}"
+            for key in RUN_FIELDS
+            if getattr(new, key) != getattr(self, key)
+        ]
+        return new if not tags else dataclasses.replace(new, name=f"{self.name}+{','.join(tags)}")
+
+    @property
+    def base_name(self) -> str:
+        """The registered preset this one was derived from (its name without overrides)."""
+        return self.name.split("+", 1)[0]
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-friendly representation."""
         return dataclasses.asdict(self)
+
+
+#: Preset fields that change what a run trains or evaluates (see ReproducePreset.override).
+RUN_FIELDS: tuple[str, ...] = ("num_tasks", "task_seed", "num_samples", "max_epochs", "patience")
+
+
+def _tag_value(value: Any) -> str:
+    if isinstance(value, dict):
+        return "+".join(f"{key.split('/')[-1]}:{val}" for key, val in sorted(value.items()))
+    return str(value)
 
 
 # The paper's protocol: 10 models x 10 tasks, the paper's data sizes and architectures.
@@ -124,7 +177,7 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
     # The best-validation weights are kept, so this can only lower a model's validation loss.
     "paper-fast-long": _PAPER_FAST.replace(name="paper-fast-long", max_epochs=1000,
                                            patience=100),
-    # Table 3: noisy dynamics.
+    # Table 3: noisy dynamics, noise variance 1 for every domain and also 2 for Planar.
     "paper-noisy": ReproducePreset(
         name="paper-noisy",
         envs=("pcc/Planar-v0", "pcc/PendulumSwingUp-v0", "pcc/CartPole-v0", "pcc/ThreeLink-v0"),
@@ -133,6 +186,7 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
         num_tasks=10,
         model_variant="fast",
         noise_levels=(1.0,),
+        env_noise_levels={"pcc/Planar-v0": (1.0, 2.0**0.5)},
     ),
 }
 

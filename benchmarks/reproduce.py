@@ -12,20 +12,22 @@ the paper's numbers beside ours, the oracle controller as the ceiling) and a bar
 Examples:
     python -m benchmarks.reproduce --preset quick
     python -m benchmarks.reproduce --preset paper --envs pcc/Planar-v0 --workers 2
-    python -m benchmarks.reproduce --preset paper --backend ray --ray-address auto
+    python -m benchmarks.reproduce --preset paper --backend ray --ray-address auto \
+        --ray-gpus-per-task 0.5
     python -m benchmarks.reproduce --aggregate-only
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import platform
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -33,7 +35,15 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.presets import PAPER_RESULTS, REPRODUCE_PRESETS, ReproducePreset
+from benchmarks.presets import (
+    ABLATIONS,
+    ALL_METHODS,
+    LATENT_MAP_ENVS,
+    LATENT_MAP_MODELS,
+    PAPER_RESULTS,
+    REPRODUCE_PRESETS,
+    ReproducePreset,
+)
 
 DEFAULT_RESULTS_DIR = Path("pcc_results") / "reproduce"
 RESULT_FORMAT = 1
@@ -91,6 +101,20 @@ def _write_json_atomic(path: Path, payload: Any) -> None:
     os.replace(tmp, path)
 
 
+def _write_text_atomic(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + f".{os.getpid()}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _save_figure_atomic(fig: Any, path: Path) -> None:
+    """``fig.savefig`` through a temporary file, so a reader never sees half a PNG."""
+    tmp = path.with_suffix(path.suffix + f".{os.getpid()}.tmp")
+    fig.savefig(tmp, dpi=120, format=path.suffix.lstrip(".") or "png", bbox_inches="tight")
+    os.replace(tmp, path)
+
+
 def checkpoint_path(results_dir: str | Path, spec: RunSpec) -> Path:
     """Where a run's trained agent is saved (``PCCAgent.load`` reads it back)."""
     return Path(results_dir) / "checkpoints" / spec.relative_path.with_suffix(".pt")
@@ -144,8 +168,8 @@ def _preset_for(spec: RunSpec) -> Any:
 def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
     """Whether a record was evaluated by this planner revision with the preset's settings.
 
-    Records without a revision were evaluated by revision 1. Oracle records only need the
-    revision (their settings are ``ORACLE_CONFIGS``, part of the record).
+    Records without a revision were evaluated by revision 1. Oracle records are compared
+    with the env's current ``ORACLE_CONFIGS`` entry.
     """
     from pcc_agent.planning import PLANNER_REVISION
 
@@ -153,7 +177,10 @@ def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
     if config.get("planner_revision", 1) != PLANNER_REVISION:
         return False
     if spec.method == ORACLE:
-        return True
+        from pcc_agent.oracle import oracle_config_for
+
+        wanted = json.loads(json.dumps(asdict(oracle_config_for(spec.env_id))))
+        return config.get("oracle") == wanted
     wanted = json.loads(json.dumps(asdict(_preset_for(spec).planner)))
     return config.get("planner") == wanted
 
@@ -180,7 +207,8 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     trained = load_finished_run(path)
     if (
         trained is not None
-        and trained.get("spec") == asdict(spec)
+        and spec.method != ORACLE
+        and _same_spec(trained.get("spec"), spec)
         and checkpoint_path(results_dir, spec).exists()
     ):
         return _reevaluate(trained, spec, Path(results_dir), seeds, env_kwargs)
@@ -265,8 +293,8 @@ def _reevaluate(
 
 
 def _maybe_plot_latent_map(agent: Any, spec: RunSpec, results_dir: Path) -> None:
-    """Latent maps (paper Figure 2) for the first two models of Planar and Pendulum."""
-    if spec.seed >= 2 or spec.env_id not in ("pcc/Planar-v0", "pcc/PendulumSwingUp-v0"):
+    """Latent maps (paper Figure 2) for the first models of the envs in ``LATENT_MAP_ENVS``."""
+    if spec.seed >= LATENT_MAP_MODELS or spec.env_id not in LATENT_MAP_ENVS:
         return
     from pcc_agent.plots import plot_env_latent_map
 
@@ -286,7 +314,7 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[Ru
     """All runs of a preset, oracle runs first (one per env and noise level)."""
     runs: list[RunSpec] = []
     for env_id in preset.envs:
-        for noise in preset.noise_levels:
+        for noise in preset.noise_levels_for(env_id):
             common = {
                 "env_id": env_id,
                 "noise_std": float(noise),
@@ -313,10 +341,14 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[Ru
 
 
 def _worker_init() -> None:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
 
     torch.set_num_threads(1)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+#: What a backend reports per run, in completion order: the record, or the run's error.
+Outcome = tuple[RunSpec, dict[str, Any] | Exception]
 
 
 def run_grid(
@@ -326,48 +358,124 @@ def run_grid(
     backend: str = "process",
     ray_address: str | None = None,
     data_dir: str | None = None,
+    ray_gpus_per_task: float = 0.0,
 ) -> list[dict[str, Any]]:
-    """Execute the runs that are not finished yet, in a process pool or on Ray."""
+    """Execute the runs that are not finished yet, in a process pool or on Ray.
+
+    A failed run does not stop the others; the failures are raised together at the end.
+    Ctrl-C cancels the queued runs (finished ones are kept: re-running continues the grid).
+    """
     todo = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
     print(f"{len(runs) - len(todo)} of {len(runs)} runs already finished; {len(todo)} to run.")
     if not todo:
         return []
-    records: list[dict[str, Any]] = []
     if backend == "ray":
-        try:
-            import ray
-        except ImportError as exc:  # pragma: no cover - depends on the optional extra
-            raise SystemExit("--backend ray needs Ray: pip install 'pcc-control[ray]'") from exc
-        ray.init(address=ray_address, ignore_reinit_error=True)
-        remote = ray.remote(num_cpus=1)(_ray_task)
-        futures = [remote.remote(r, str(results_dir), data_dir) for r in todo]
-        for i, record in enumerate(ray.get(futures)):
-            records.append(record)
-            _report(i + 1, len(todo), record)
-        return records
+        outcomes = _ray_outcomes(todo, results_dir.resolve(), data_dir, ray_address,
+                                 ray_gpus_per_task)
+        # Ray workers may run on other machines: the driver writes what they return.
+        return collect_outcomes(outcomes, len(todo), write_to=results_dir)
     if workers <= 1:
         _worker_init()
-        for i, spec in enumerate(todo):
-            record = execute_run(spec, results_dir, data_dir)
-            records.append(record)
-            _report(i + 1, len(todo), record)
-        return records
+        return collect_outcomes(_serial_outcomes(todo, results_dir, data_dir), len(todo))
+    outcomes = pool_outcomes(execute_run, todo, workers, results_dir, data_dir)
+    return collect_outcomes(outcomes, len(todo))
+
+
+def collect_outcomes(
+    outcomes: Iterator[Outcome], total: int, write_to: Path | None = None
+) -> list[dict[str, Any]]:
+    """Report every outcome as it comes (with a progress bar); raise the failures at the end.
+
+    With ``write_to``, the driver also writes each new record there (atomically).
+    """
+    from tqdm.auto import tqdm
+
+    records: list[dict[str, Any]] = []
     failures: list[str] = []
-    with ProcessPoolExecutor(max_workers=workers, initializer=_worker_init) as pool:
-        futures = {pool.submit(execute_run, r, results_dir, data_dir): r for r in todo}
-        for i, future in enumerate(as_completed(futures)):
-            try:
-                record = future.result()
-            except Exception as error:  # one failed run must not stop or hang the grid
-                spec = futures[future]
-                failures.append(f"{spec.env_id} {spec.method} seed={spec.seed}: {error!r}")
-                print(f"[{i + 1}/{len(todo)}] FAILED {failures[-1]}", flush=True)
+    with contextlib.ExitStack() as stack:
+        if hasattr(outcomes, "close"):  # a stop here (Ctrl-C) stops the backend's queue too
+            stack.callback(outcomes.close)
+        bar = stack.enter_context(tqdm(total=total, unit="run", desc="grid"))
+        for i, (spec, outcome) in enumerate(outcomes):
+            bar.update()
+            if isinstance(outcome, Exception):
+                failures.append(f"{spec.env_id} {spec.method} seed={spec.seed}: {outcome!r}")
+                bar.write(f"[{i + 1}/{total}] FAILED {failures[-1]}")
                 continue
-            records.append(record)
-            _report(i + 1, len(todo), record)
+            if write_to is not None and not outcome.get("skipped"):
+                _write_json_atomic(write_to / spec.relative_path, outcome)
+            records.append(outcome)
+            bar.write(_report_line(i + 1, total, outcome))
     if failures:
         raise RuntimeError(f"{len(failures)} run(s) failed:\n" + "\n".join(failures))
     return records
+
+
+def _serial_outcomes(
+    todo: Sequence[RunSpec], results_dir: Path, data_dir: str | None
+) -> Iterator[Outcome]:
+    for spec in todo:
+        try:
+            yield spec, execute_run(spec, results_dir, data_dir)
+        except Exception as error:  # one failed run must not stop the grid
+            yield spec, error
+
+
+def pool_outcomes(
+    run: Any, todo: Sequence[RunSpec], workers: int, *args: Any
+) -> Iterator[Outcome]:
+    """``run(spec, *args)`` for every spec in a pool of ``workers`` processes.
+
+    If the consumer stops early (Ctrl-C, an error, ``close()``), the queued runs are
+    cancelled instead of being trained silently before the program exits.
+    """
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
+    futures: dict[Any, RunSpec] = {}
+    try:
+        futures = {pool.submit(run, spec, *args): spec for spec in todo}
+        for future in as_completed(futures):
+            try:
+                outcome: dict[str, Any] | Exception = future.result()
+            except Exception as error:  # one failed run must not stop or hang the grid
+                outcome = error
+            yield futures[future], outcome
+    except BaseException:
+        # Cancel each queued future here: the pool's own cancel_futures can miss them when
+        # the executor object is collected before its manager thread acts on the flag.
+        for future in futures:
+            future.cancel()
+        pool.shutdown(wait=False, cancel_futures=True)
+        print("Stopped: queued runs cancelled; finished runs are kept, re-run to continue.",
+              file=sys.stderr, flush=True)
+        raise
+    pool.shutdown()
+
+
+def _ray_outcomes(
+    todo: Sequence[RunSpec], results_dir: Path, data_dir: str | None, address: str | None,
+    gpus_per_task: float,
+) -> Iterator[Outcome]:
+    """The runs as Ray tasks (one CPU and ``gpus_per_task`` GPUs each), in completion order."""
+    try:
+        import ray
+    except ImportError as exc:  # pragma: no cover - depends on the optional extra
+        raise SystemExit("--backend ray needs Ray: pip install 'pcc-control[ray]'") from exc
+    ray.init(address=address, ignore_reinit_error=True)
+    task = ray.remote(num_cpus=1, num_gpus=gpus_per_task)(_ray_task)
+    pending = {task.remote(spec, str(results_dir), data_dir): spec for spec in todo}
+    try:
+        while pending:
+            (ref,), _ = ray.wait(list(pending), num_returns=1)
+            spec = pending.pop(ref)
+            try:
+                outcome: dict[str, Any] | Exception = ray.get(ref)
+            except Exception as error:  # a failed task must not lose the others' results
+                outcome = error
+            yield spec, outcome
+    except BaseException:
+        for ref in pending:
+            ray.cancel(ref)
+        raise
 
 
 def _ray_task(spec: RunSpec, results_dir: str, data_dir: str | None) -> dict[str, Any]:
@@ -375,13 +483,13 @@ def _ray_task(spec: RunSpec, results_dir: str, data_dir: str | None) -> dict[str
     return execute_run(spec, results_dir, data_dir)
 
 
-def _report(i: int, n: int, record: dict[str, Any]) -> None:
+def _report_line(i: int, n: int, record: dict[str, Any]) -> str:
     spec = record["spec"]
-    print(
+    done = "already finished" if record.get("skipped") else (
+        f"train {record['train_seconds']:.0f}s, control {record['eval_seconds']:.0f}s")
+    return (
         f"[{i}/{n}] {spec['env_id']} {spec['method']} noise={spec['noise_std']} "
-        f"seed={spec['seed']}: {record['mean']:.1f}% of steps in goal "
-        f"(train {record['train_seconds']:.0f}s, control {record['eval_seconds']:.0f}s)",
-        flush=True,
+        f"seed={spec['seed']}: {record['mean']:.1f}% of steps in goal ({done})"
     )
 
 
@@ -441,6 +549,7 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         def se(x: np.ndarray) -> float:
             return float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
 
+        planned = REPRODUCE_PRESETS.get(preset.split("+", 1)[0])
         row: dict[str, Any] = {
             "env": env_id,
             "method": method,
@@ -448,6 +557,9 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
             "preset": preset,
             "model_variant": recs[0]["spec"]["model_variant"],
             "n_models": len(recs),
+            # The preset's grid size: a row with fewer models is a reduced grid.
+            "n_models_planned": (
+                1 if method == ORACLE else planned.num_models if planned else None),
             "n_tasks": int(np.median([m.size for m in per_model])),
             "seeds": [r["spec"]["seed"] for r in recs],
             "task_seed": recs[0]["spec"].get("task_seed"),
@@ -476,6 +588,23 @@ def _fmt(pair: Sequence[float] | None) -> str:
     return "-" if pair is None else f"{pair[0]:.1f} ± {pair[1]:.1f}"
 
 
+def paper_table(row: dict[str, Any]) -> str:
+    """Which of the paper's tables a summary row belongs to."""
+    if row["noise_std"]:
+        return "Table 3: noisy dynamics"
+    if row["method"] in ABLATIONS:
+        return "Table 2: ablations"
+    return "Table 1: E2C, RCE and PCC"
+
+
+def _models_cell(row: dict[str, Any]) -> str:
+    """``"10 x 10"``, or ``"3 of 10 x 10 (reduced grid)"`` when models are missing."""
+    planned = row.get("n_models_planned")
+    if planned is not None and row["n_models"] < planned:
+        return f"{row['n_models']} of {planned} x {row['n_tasks']} (reduced grid)"
+    return f"{row['n_models']} x {row['n_tasks']}"
+
+
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The summary as a Markdown table, our numbers beside the paper's."""
     lines = [
@@ -489,7 +618,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
         oracle = "-" if r["oracle_mean"] is None else f"{r['oracle_mean']:.1f}"
         lines.append(
             f"| {r['env']} | {r['method']} | {r['noise_std']:g} | {r['preset']} "
-            f"({r['model_variant']}) | {r['n_models']} x {r['n_tasks']} "
+            f"({r['model_variant']}) | {_models_cell(r)} "
             f"| {_fmt((r['mean_all'], r['se_all']))} | {_fmt(r['paper_all'])} "
             f"| {_fmt((r['mean_top1'], r['se_top1']))} | {_fmt(r['paper_top1'])} | {iqm} "
             f"| {oracle} |"
@@ -569,15 +698,21 @@ def write_summary(results_dir: Path) -> list[dict[str, Any]]:
         print("No finished runs to aggregate.")
         return rows
     _write_json_atomic(results_dir / "summary.json", rows)
+    sections = []
+    for table in sorted({paper_table(r) for r in rows}):
+        sections.append(f"## {table}\n\n" + markdown_table(
+            [r for r in rows if paper_table(r) == table]))
     text = (
         "# Percentage of steps in goal (true state), ours beside the paper's\n\n"
         "Mean ± standard error over all tasks of all models (`all`) and over the best model's "
-        "tasks (`top-1`). The paper's LaneKeeping numbers are its TORCS domain.\n\n"
-        + markdown_table(rows)
+        "tasks (`top-1`). The paper's LaneKeeping numbers are its TORCS domain. "
+        "`k of N x M (reduced grid)`: only k of the preset's N models have been run. A preset "
+        "name `base+field=value` marks runs with command-line overrides of the preset.\n\n"
+        + "\n".join(sections)
         + "\n## Evaluation settings\n\n"
         + settings_table(rows)
     )
-    (results_dir / "summary.md").write_text(text)
+    _write_text_atomic(results_dir / "summary.md", text)
     _bar_chart(rows, results_dir / "summary.png")
     print(text)
     print(f"Wrote {results_dir / 'summary.json'}, summary.md and summary.png")
@@ -615,7 +750,7 @@ def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
     ax.set_title("Control from pixels (dashed: oracle on the true state)")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    _save_figure_atomic(fig, path)
     plt.close(fig)
 
 
@@ -694,6 +829,19 @@ def estimate_cost(
 
 
 # ---------------------------------------------------------------------------- command line
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _known_envs() -> list[str]:
+    from pcc_agent.presets import PRESETS
+
+    return sorted(PRESETS)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
     parser = argparse.ArgumentParser(
@@ -702,16 +850,21 @@ def build_parser() -> argparse.ArgumentParser:
         "(env, method), resumable, aggregated into summary.json / summary.md.",
     )
     parser.add_argument("--preset", default="quick", choices=sorted(REPRODUCE_PRESETS))
-    parser.add_argument("--envs", nargs="+", help="Subset of the preset's env ids.")
-    parser.add_argument("--methods", nargs="+", help="Subset / override of the methods.")
-    parser.add_argument("--num-models", type=int, help="Override the number of models.")
+    parser.add_argument("--envs", nargs="+", choices=_known_envs(), metavar="ENV",
+                        help="Subset of the preset's env ids (any of: %(choices)s).")
+    parser.add_argument("--methods", nargs="+", choices=ALL_METHODS, metavar="METHOD",
+                        help="Subset / override of the methods (any of: %(choices)s).")
+    parser.add_argument("--num-models", type=_positive_int,
+                        help="Override the number of models.")
     parser.add_argument(
         "--seeds", type=int, nargs="+",
         help="Run only these model seeds (e.g. to split a grid over machines, or to fill in "
         "missing models); overrides --num-models.",
     )
-    parser.add_argument("--num-tasks", type=int, help="Override the number of tasks per model.")
-    parser.add_argument("--max-epochs", type=int, help="Override the training epoch cap.")
+    parser.add_argument("--num-tasks", type=_positive_int,
+                        help="Override the number of tasks per model.")
+    parser.add_argument("--max-epochs", type=_positive_int,
+                        help="Override the training epoch cap.")
     parser.add_argument(
         "--patience", type=int,
         help="Override the early-stopping patience (epochs without validation improvement).",
@@ -726,12 +879,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--workers",
-        type=int,
+        type=_positive_int,
         default=os.cpu_count() or 1,
         help="Parallel runs (one core each) for the process backend.",
     )
     parser.add_argument("--backend", choices=("process", "ray"), default="process")
     parser.add_argument("--ray-address", default=None, help="Ray cluster address (e.g. 'auto').")
+    parser.add_argument(
+        "--ray-gpus-per-task", type=float, default=0.0,
+        help="GPUs Ray reserves for each run (e.g. 1, or 0.25 to share a GPU among four "
+        "runs); with 0 (default) Ray hides the GPUs from the runs, which then train on CPU.",
+    )
     parser.add_argument(
         "--aggregate-only",
         action="store_true",
@@ -766,8 +924,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise SystemExit(f"--patience must be >= 0, got {args.patience}.")
             changes["patience"] = args.patience
         if args.noise:
+            if min(args.noise) < 0:
+                raise SystemExit(f"--noise levels must be >= 0, got {args.noise}.")
             changes["noise_levels"] = tuple(args.noise)
-        preset = preset.replace(**changes)
+            changes["env_noise_levels"] = {}
+        preset = preset.override(**changes)
         runs = expand_grid(preset, include_oracle=not args.no_oracle)
         pending = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
         cost = estimate_cost(pending, load_records(results_dir) if pending else ())
@@ -779,7 +940,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"at most {cost.upper_seconds / 3600 / workers:.1f} h if every model trains to its "
             "epoch cap; CNN 'paper' models want a GPU)."
         )
-        run_grid(runs, results_dir, args.workers, args.backend, args.ray_address, args.data_dir)
+        if preset.name != args.preset:
+            print(f"The overrides change what the runs compute: their files and rows are "
+                  f"labelled {preset.name!r}.")
+        run_grid(runs, results_dir, args.workers, args.backend, args.ray_address,
+                 args.data_dir, args.ray_gpus_per_task)
     write_summary(results_dir)
     return 0
 

@@ -5,7 +5,8 @@ as a reference, SAC with ``MlpPolicy`` on the TRUE state), evaluating it at seve
 environment samples (the learning curve) with :func:`pcc_agent.evaluation.evaluate_control`:
 the same function, task seeds and metric (percentage of steps in goal) as the reproduction
 pipeline. The PCC / E2C / RCE points (at their data-set sizes) and the oracle ceiling are
-read from the reproduction pipeline's run files for the same env and task seeds.
+read from the reproduction pipeline's run files for the same env and task seeds; runs on other
+tasks are left out, and an oracle missing there is run here (``runs/<env>/oracle.json``).
 
 Every (env, policy, reward, budget, seed) run writes one JSON file,
 ``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json`` (resumable: finished
@@ -26,13 +27,15 @@ observations need 3-4x less. ``--buffer-size`` changes it.
 
 Examples:
     python -m benchmarks.vs_sac --env pcc/Planar-v0 --steps 20000 --checkpoints 2000 5000 \
-        10000 20000 --seeds 0 1 2
+        10000 20000 --seeds 0 1 2 --results-dir benchmarks/results/vs_sac \
+        --reproduce-dir benchmarks/results/reproduce
     python -m benchmarks.vs_sac --env pcc/Planar-v0 --aggregate-only
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -47,7 +50,13 @@ import gymnasium as gym
 import numpy as np
 
 from benchmarks.presets import REPRODUCE_PRESETS
-from benchmarks.reproduce import ORACLE, _write_json_atomic, load_records
+from benchmarks.reproduce import (
+    ORACLE,
+    _save_figure_atomic,
+    _write_json_atomic,
+    _write_text_atomic,
+    load_records,
+)
 
 DEFAULT_RESULTS_DIR = Path("pcc_results") / "vs_sac"
 DEFAULT_REPRODUCE_DIR = Path("pcc_results") / "reproduce"
@@ -93,11 +102,10 @@ def load_finished_sac_run(
     Stale: made with other steps, checkpoints, task seeds or reward (not the curve asked
     for). Records without a ``reward`` key were trained on the dense reward.
     """
-    if not path.exists():
-        return None
-    record = json.loads(path.read_text())
+    record = _read_record(path)
     if (
-        record.get("status") != "done"
+        record is None
+        or record.get("status") != "done"
         or record.get("steps") != steps
         or [p["env_steps"] for p in record.get("curve", [])] != list(checkpoints)
         or record.get("task_seeds") != list(task_seed_list)
@@ -105,6 +113,15 @@ def load_finished_sac_run(
     ):
         return None
     return record
+
+
+def _read_record(path: Path) -> dict[str, Any] | None:
+    """A JSON record, or None if the file is missing, partial or not a record."""
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    return record if isinstance(record, dict) else None
 
 
 def sac_run_path(
@@ -137,6 +154,7 @@ def run_sac(
     import torch
     from stable_baselines3 import SAC
     from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm.auto import tqdm
 
     from pcc_agent.evaluation import evaluate_control
 
@@ -160,8 +178,11 @@ def run_sac(
     )
     curve: list[dict[str, Any]] = []
 
+    bar = tqdm(total=steps, unit="step", desc=f"SAC {observation} seed {seed}")
+
     class EvalAtCheckpoints(BaseCallback):
         def _on_step(self) -> bool:
+            bar.update(self.num_timesteps - bar.n)
             if wanted and self.num_timesteps >= wanted[0]:
                 wanted.pop(0)
                 start = time.perf_counter()
@@ -180,15 +201,15 @@ def run_sac(
                         "eval_seconds": time.perf_counter() - start,
                     }
                 )
-                print(
+                bar.write(
                     f"  {env_id} SAC({observation}) seed {seed} @ {self.num_timesteps} steps: "
-                    f"{ev.mean:.1f}% in goal",
-                    flush=True,
+                    f"{ev.mean:.1f}% in goal"
                 )
             return True
 
     start = time.perf_counter()
-    model.learn(total_timesteps=steps, callback=EvalAtCheckpoints())
+    with bar:
+        model.learn(total_timesteps=steps, callback=EvalAtCheckpoints())
     record = {
         "format": FORMAT,
         "status": "done",
@@ -216,7 +237,13 @@ class _StatePolicy:
     def __init__(self, model: Any, env: gym.Env) -> None:
         self.model, self.env = model, env
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
         """Act on the env's true state instead of the image observation."""
         s = self.env.unwrapped.state.astype(np.float32)[None]
         action, _ = self.model.predict(s, deterministic=deterministic)
@@ -232,12 +259,46 @@ def _se(x: np.ndarray) -> float:
     return float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
 
 
-def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, Any]:
+def oracle_point(env_id: str, task_seed_list: Sequence[int], results_dir: Path) -> dict | None:
+    """The oracle's record on these tasks, run here and cached if needed (None: no oracle)."""
+    from pcc_agent.evaluation import evaluate_control
+    from pcc_agent.oracle import ORACLE_CONFIGS, OracleController
+
+    config = ORACLE_CONFIGS.get(env_id)
+    if config is None:
+        return None
+    settings = json.loads(json.dumps(dataclasses.asdict(config)))
+    path = results_dir / "runs" / env_id.replace("/", "_") / "oracle.json"
+    record = _read_record(path)
+    if (record is not None and record.get("task_seeds") == list(task_seed_list)
+            and record.get("oracle") == settings):
+        return record
+    print(f"Running the oracle on {len(task_seed_list)} {env_id} tasks (the ceiling).")
+    ev = evaluate_control(lambda env: OracleController(env, config), env_id, task_seed_list,
+                          record_states=False)
+    record = {"format": FORMAT, "status": "done", "env_id": env_id, "oracle": settings,
+              "task_seeds": list(task_seed_list), "percentages": ev.percentages.tolist()}
+    _write_json_atomic(path, record)
+    return record
+
+
+def summarize(
+    env_id: str,
+    results_dir: Path,
+    reproduce_dir: Path,
+    task_seed_list: Sequence[int] | None = None,
+) -> dict[str, Any]:
     """Learning curves (mean and SE over seeds) and the model-based points, as one dict.
 
     One curve per policy, reward and step budget, keyed
-    ``"sac_<observation>[_sparse] (<steps> steps)"``.
+    ``"sac_<observation>[_sparse] (<steps> steps)"``. With ``task_seed_list``, only runs
+    evaluated on exactly these tasks count, and the oracle is run on them if the
+    reproduction results have none.
     """
+
+    def same_tasks(record: dict[str, Any]) -> bool:
+        return task_seed_list is None or record.get("task_seeds") == list(task_seed_list)
+
     curves: dict[str, Any] = {}
     run_dir = results_dir / "runs" / env_id.replace("/", "_")
     budget_dirs = sorted(
@@ -245,8 +306,9 @@ def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, 
         key=lambda d: (d.parent.name, int(d.name.removeprefix("budget"))),
     )
     for sub in budget_dirs:
-        records = [json.loads(p.read_text()) for p in sorted(sub.glob("seed*.json"))]
-        records = [rec for rec in records if rec.get("status") == "done"]
+        records = [_read_record(p) for p in sorted(sub.glob("seed*.json"))]
+        records = [rec for rec in records
+                   if rec is not None and rec.get("status") == "done" and same_tasks(rec)]
         if not records:
             continue
         points: dict[int, list[float]] = {}
@@ -265,7 +327,7 @@ def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, 
     model_based: dict[str, Any] = {}
     for rec in load_records(reproduce_dir) if reproduce_dir.exists() else []:
         spec = rec["spec"]
-        if spec["env_id"] != env_id or spec["noise_std"] != 0.0:
+        if spec["env_id"] != env_id or spec["noise_std"] != 0.0 or not same_tasks(rec):
             continue
         # One point per (method, preset): "paper" and "paper-fast" runs are different models.
         entry = model_based.setdefault(
@@ -279,6 +341,14 @@ def summarize(env_id: str, results_dir: Path, reproduce_dir: Path) -> dict[str, 
         )
         entry["percentages"].extend(rec["percentages"])
         entry["num_samples"] = rec.get("config", {}).get("data", {}).get("num_samples")
+    if task_seed_list is not None and not any(
+        entry["method"] == ORACLE for entry in model_based.values()
+    ):
+        oracle = oracle_point(env_id, task_seed_list, results_dir)
+        if oracle is not None:
+            model_based["oracle (vs_sac)"] = {"method": ORACLE, "percentages":
+                                              list(oracle["percentages"]), "num_samples": None,
+                                              "preset": "vs_sac"}
     for entry in model_based.values():
         values = np.asarray(entry.pop("percentages"))
         entry.update(mean=float(values.mean()), se=_se(values), n_tasks=int(values.size))
@@ -319,7 +389,7 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
                 f"| {policy} | {p['env_steps']} | {p['mean']:.1f} ± {p['se']:.1f} "
                 f"| {p['n_seeds']} seeds |"
             )
-    (results_dir / f"{name}.md").write_text("\n".join(lines) + "\n")
+    _write_text_atomic(results_dir / f"{name}.md", "\n".join(lines) + "\n")
     fig, ax = plt.subplots(figsize=(9, 4.5))
     for policy, curve in summary["sac"].items():
         x = [p["env_steps"] for p in curve]
@@ -349,15 +419,17 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
     ax.set_title(f"{summary['env']}: SAC vs embed-to-control")
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
-    fig.savefig(results_dir / f"{name}.png", dpi=120)
+    _save_figure_atomic(fig, results_dir / f"{name}.png")
     plt.close(fig)
     print("\n".join(lines))
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default="pcc/Planar-v0")
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.vs_sac", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("--env", default="pcc/Planar-v0", help="Registered env id.")
     parser.add_argument("--steps", type=int, default=100_000, help="SAC environment steps.")
     parser.add_argument(
         "--checkpoints",
@@ -367,7 +439,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="Env-step counts at which SAC is evaluated (default: the PCC "
         "data-set size and 4 log-spaced points up to --steps).",
     )
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="SAC seeds.")
     parser.add_argument(
         "--observations", nargs="+", default=["image", "state"], choices=["image", "state"]
     )
@@ -378,8 +450,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="The env reward SAC trains on: 'dense' (negative weighted squared distance to "
         "the goal) or 'sparse' (1 per step in the goal region, the metric itself).",
     )
-    parser.add_argument("--num-tasks", type=int, default=REPRODUCE_PRESETS["paper"].num_tasks)
-    parser.add_argument("--buffer-size", type=int, default=100_000)
+    parser.add_argument(
+        "--num-tasks", type=int, default=REPRODUCE_PRESETS["paper"].num_tasks,
+        help="Control tasks per evaluation (the reproduction pipeline's task seeds).",
+    )
+    parser.add_argument(
+        "--buffer-size", type=int, default=100_000,
+        help="Replay buffer in transitions (100,000 80x80x2 transitions take about 2.6 GB).",
+    )
     parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
     parser.add_argument(
         "--reproduce-dir",
@@ -387,8 +465,10 @@ def build_parser() -> argparse.ArgumentParser:
         default=DEFAULT_REPRODUCE_DIR,
         help="Where the reproduction pipeline's run files are (PCC points).",
     )
-    parser.add_argument("--threads", type=int, default=max(1, (os.cpu_count() or 1)))
-    parser.add_argument("--aggregate-only", action="store_true")
+    parser.add_argument("--threads", type=int, default=max(1, (os.cpu_count() or 1)),
+                        help="Torch CPU threads.")
+    parser.add_argument("--aggregate-only", action="store_true",
+                        help="Only rebuild the table and plot from finished runs.")
     return parser
 
 
@@ -401,12 +481,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     from pcc_agent.presets import get_preset
 
     torch.set_num_threads(args.threads)
+    seeds = task_seeds(REPRODUCE_PRESETS["paper"].task_seed, args.num_tasks)
     if not args.aggregate_only:
         dataset_size = get_preset(args.env).data.num_samples
         checkpoints = args.checkpoints or sorted(
             {dataset_size, *np.geomspace(1000, args.steps, 4).astype(int).tolist()}
         )
-        seeds = task_seeds(REPRODUCE_PRESETS["paper"].task_seed, args.num_tasks)
         for observation in args.observations:
             for seed in args.seeds:
                 run_sac(
@@ -420,7 +500,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     args.results_dir,
                     args.reward,
                 )
-    write_outputs(summarize(args.env, args.results_dir, args.reproduce_dir), args.results_dir)
+    summary = summarize(args.env, args.results_dir, args.reproduce_dir, seeds)
+    write_outputs(summary, args.results_dir)
     return 0
 
 

@@ -37,6 +37,7 @@ import os
 import re
 import tempfile
 import warnings
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -153,10 +154,24 @@ class TransitionDataset:
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> TransitionDataset:
-        """Read a file written by :meth:`save` (never unpickles)."""
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in _ARRAYS}
-            metadata = json.loads(str(data["metadata"]))
+        """Read a file written by :meth:`save` (never unpickles).
+
+        Raises:
+            FileNotFoundError: No file at ``path``.
+            ValueError: The file is not a complete data set written by :meth:`save`
+                (truncated, corrupt, or missing arrays).
+        """
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {name: data[name] for name in _ARRAYS}
+                metadata = json.loads(str(data["metadata"]))
+        except FileNotFoundError:
+            raise
+        except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as exc:
+            raise ValueError(
+                f"{path} is not a complete data set written by TransitionDataset.save "
+                f"({type(exc).__name__}: {exc})"
+            ) from exc
         return cls(**arrays, metadata=metadata)
 
 
@@ -289,7 +304,7 @@ def load_or_collect(
     if path.exists():
         try:
             data = TransitionDataset.load(path)
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, ValueError) as exc:
             warnings.warn(f"Unreadable dataset cache {path} ({exc}); regenerating.", stacklevel=2)
         else:
             if data.metadata == expected:

@@ -105,6 +105,18 @@ def test_cache_regenerates_a_mismatched_file(tmp_path):
     assert TransitionDataset.load(path).metadata["seed"] == 0
 
 
+def test_cache_regenerates_a_truncated_file(tmp_path):
+    """A cache file cut short (a crash while copying it, a full disk) is rebuilt, not fatal."""
+    path = cache_path("pcc/Planar-v0", 16, 0, cache_dir=tmp_path)
+    collect_transitions("pcc/Planar-v0", 16, seed=0).save(path)
+    path.write_bytes(path.read_bytes()[:300])
+    with pytest.raises(ValueError, match="not a complete data set"):
+        TransitionDataset.load(path)
+    with pytest.warns(UserWarning, match="Unreadable dataset cache"):
+        data = load_or_collect("pcc/Planar-v0", 16, seed=0, cache_dir=tmp_path)
+    assert data.metadata["seed"] == 0 and TransitionDataset.load(path).metadata["seed"] == 0
+
+
 def test_failed_save_leaves_no_file(tmp_path, monkeypatch):
     data = collect_transitions("pcc/Planar-v0", 8, seed=0)
 

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from benchmarks.reproduce import (
     RunSpec,
@@ -204,3 +205,114 @@ def test_cost_estimate_uses_finished_runs_of_the_same_kind():
     # Another epoch budget is another kind: no record applies.
     longer = dataclasses.replace(pcc, max_epochs=2)
     assert estimate_cost([longer], finished).runs_from_records == 0
+
+
+def _sleepy_run(spec: RunSpec, marker_dir: Path) -> dict:
+    """A stand-in run for the pool tests: leaves a marker, takes a moment."""
+    import time
+
+    (marker_dir / f"{spec.seed}").write_text("started")
+    time.sleep(0.3)
+    return {"seed": spec.seed}
+
+
+def test_stopping_the_pool_cancels_queued_runs(tmp_path):
+    """Ctrl-C (any early stop of the consumer) must not train the rest of the grid."""
+    import time
+
+    from benchmarks.reproduce import pool_outcomes
+
+    specs = [tiny_spec(seed) for seed in range(16)]
+    outcomes = pool_outcomes(_sleepy_run, specs, 2, tmp_path)
+    spec, first = next(outcomes)
+    assert first == {"seed": spec.seed}
+    start = time.perf_counter()
+    outcomes.close()  # what a KeyboardInterrupt in the consumer does
+    assert time.perf_counter() - start < 1.0  # did not wait for the queue
+    time.sleep(1.5)  # the few runs already handed to the workers have finished by now
+    # At most: the finished one, one per worker, and the pool's small hand-over queue.
+    started = len(list(tmp_path.iterdir()))
+    assert started <= 8, f"{started} of 16 runs started although the grid was stopped"
+
+
+def test_failed_run_is_reported_after_the_others_and_driver_writes_records(tmp_path):
+    from benchmarks.reproduce import collect_outcomes
+
+    good = [tiny_spec(0), tiny_spec(2)]
+    records = [{"spec": dataclasses.asdict(s), "mean": 50.0, "train_seconds": 1.0,
+                "eval_seconds": 1.0, "status": "done", "format": 1} for s in good]
+    outcomes = iter([(good[0], records[0]), (tiny_spec(1), ValueError("boom")),
+                     (good[1], records[1])])
+    with pytest.raises(RuntimeError, match=r"1 run\(s\) failed:\n.*seed=1: ValueError\('boom'\)"):
+        collect_outcomes(outcomes, 3, write_to=tmp_path)
+    for spec in good:  # both finished runs are kept although one run failed
+        assert json.loads((tmp_path / spec.relative_path).read_text())["mean"] == 50.0
+
+
+def test_overrides_that_change_the_runs_rename_the_preset():
+    from benchmarks.presets import REPRODUCE_PRESETS
+    from benchmarks.reproduce import expand_grid
+
+    paper = REPRODUCE_PRESETS["paper"]
+    # Selecting cells keeps the name: these are cells of the paper grid.
+    assert paper.override(envs=("pcc/Planar-v0",), model_seeds=(3,)).name == "paper"
+    shorter = paper.override(envs=("pcc/Planar-v0",), max_epochs=5, num_tasks=3)
+    assert shorter.name == "paper+num_tasks=3,max_epochs=5" and shorter.base_name == "paper"
+    runs = expand_grid(shorter)
+    assert {r.preset for r in runs} == {shorter.name}
+    assert all("paper+num_tasks=3,max_epochs=5" in str(r.relative_path) for r in runs)
+    # Table 3 runs Planar at noise variance 1 and 2, the other domains at variance 1.
+    noisy = REPRODUCE_PRESETS["paper-noisy"]
+    levels = {(r.env_id, r.noise_std) for r in expand_grid(noisy, include_oracle=False)}
+    assert ("pcc/Planar-v0", 2.0**0.5) in levels and ("pcc/CartPole-v0", 1.0) in levels
+    assert ("pcc/CartPole-v0", 2.0**0.5) not in levels
+
+
+def test_summary_says_which_table_and_when_the_grid_is_reduced():
+    from benchmarks.reproduce import _models_cell, paper_table
+
+    def rec(method, seed, noise=0.0):
+        return {"spec": {"env_id": "pcc/Planar-v0", "method": method, "noise_std": noise,
+                         "preset": "paper", "seed": seed, "model_variant": "paper"},
+                "percentages": [10.0, 20.0], "train_seconds": 1.0}
+
+    rows = aggregate([rec("pcc", 0), rec("pcc", 1), rec("pcc-amortized", 0),
+                      rec("pcc", 0, noise=1.0)])
+    by_key = {(r["method"], r["noise_std"]): r for r in rows}
+    assert _models_cell(by_key[("pcc", 0.0)]) == "2 of 10 x 2 (reduced grid)"
+    assert [paper_table(by_key[k])[:7] for k in (("pcc", 0.0), ("pcc-amortized", 0.0),
+                                                  ("pcc", 1.0))] == ["Table 1", "Table 2",
+                                                                     "Table 3"]
+    full = aggregate([rec("pcc", s) for s in range(10)])[0]
+    assert _models_cell(full) == "10 x 2"
+
+
+def test_oracle_record_of_other_oracle_settings_is_stale(tmp_path):
+    from pcc_agent.oracle import oracle_config_for
+
+    spec = dataclasses.replace(tiny_spec(), method="oracle", num_samples=None, max_epochs=None)
+    oracle = json.loads(json.dumps(dataclasses.asdict(oracle_config_for(spec.env_id))))
+    record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": [],
+              "config": {"oracle": oracle, "planner_revision": PLANNER_REVISION}}
+    path = tmp_path / "oracle.json"
+    path.write_text(json.dumps(record))
+    assert load_finished_run(path, spec) is not None
+    record["config"]["oracle"] = {**oracle, "r_weight": 123.0}
+    path.write_text(json.dumps(record))
+    assert load_finished_run(path, spec) is None
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [(["--methods", "pcc", "ppo"], "invalid choice: 'ppo'"),
+     (["--envs", "pcc/Nope-v0"], "invalid choice: 'pcc/Nope-v0'"),
+     (["--num-tasks", "0"], "must be at least 1"),
+     (["--noise", "-1"], "--noise levels must be >= 0")],
+)
+def test_bad_command_line_is_refused_before_any_run(tmp_path, capsys, args, message):
+    from benchmarks.reproduce import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main([*args, "--results-dir", str(tmp_path)])
+    assert message in capsys.readouterr().err + str(exit_info.value)
+    assert not (tmp_path / "runs").exists()

@@ -21,6 +21,9 @@ def test_vs_sac_tiny_budget(tmp_path):
         assert [p["env_steps"] for p in curve] == [60, 120]
         assert all(0.0 <= p["mean"] <= 100.0 for p in curve)
     assert (out / "Planar-v0.png").exists() and (out / "Planar-v0.md").exists()
+    # No reproduction results: the oracle ceiling is run here, on the same task.
+    oracle = summary["model_based"]["oracle (vs_sac)"]
+    assert oracle["n_tasks"] == 1 and 0.0 <= oracle["mean"] <= 100.0
     # Finished runs are reused, not retrained.
     record = vs_sac.sac_run_path(out, "pcc/Planar-v0", "image", 120, 0, "sparse")
     assert record.exists()
@@ -89,3 +92,18 @@ def test_model_based_points_are_per_preset(tmp_path):
     points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)["model_based"]
     assert points["pcc (paper)"]["mean"] == 15.0 and points["pcc (paper)"]["num_samples"] == 5000
     assert points["pcc (paper-fast)"]["mean"] == 80.0
+
+
+def test_model_based_points_on_other_tasks_are_left_out(tmp_path):
+    from benchmarks.reproduce import _write_json_atomic
+
+    for name, tasks, values in (("same", [1, 2], [10.0, 30.0]), ("other", [3, 4], [90.0, 90.0])):
+        _write_json_atomic(
+            tmp_path / "runs" / name / "pcc.json",
+            {"format": 1, "status": "done", "task_seeds": tasks, "percentages": values,
+             "spec": {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0,
+                      "preset": "paper"}, "config": {"data": {"num_samples": 5000}}},
+        )
+    (tmp_path / "runs" / "broken.json").write_text('{"format": 1, "sta')  # a killed write
+    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])["model_based"]
+    assert points["pcc (paper)"]["mean"] == 20.0 and points["pcc (paper)"]["n_tasks"] == 2
