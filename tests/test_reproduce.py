@@ -85,6 +85,31 @@ def test_finished_run_is_skipped_and_partial_run_redone(tmp_path):
     assert redone["percentages"] == record["percentages"]
 
 
+def test_run_killed_mid_training_is_redone(tmp_path):
+    """SIGKILL while the model trains: nothing counts as finished, the next call redoes it."""
+    import signal
+    import time
+
+    spec = dataclasses.replace(tiny_spec(3), max_epochs=40, patience=40)
+    data_dir = tmp_path / "data"
+    code = (
+        "import sys; from benchmarks.reproduce import RunSpec, execute_run; "
+        f"execute_run(RunSpec(**{dataclasses.asdict(spec)!r}), {str(tmp_path)!r}, "
+        f"{str(data_dir)!r})"
+    )
+    child = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT)
+    deadline = time.monotonic() + 120
+    while not list(data_dir.glob("*.npz")):  # the data set is written just before training
+        assert child.poll() is None and time.monotonic() < deadline, "run ended before training"
+        time.sleep(0.02)
+    child.send_signal(signal.SIGKILL)
+    child.wait()
+    path = tmp_path / spec.relative_path
+    assert load_finished_run(path, spec) is None
+    redone = execute_run(spec, tmp_path, str(data_dir))
+    assert not redone.get("skipped") and load_finished_run(path, spec) is not None
+
+
 def test_aggregate_all_and_top1():
     def rec(seed, values):
         return {
