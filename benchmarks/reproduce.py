@@ -48,6 +48,9 @@ from benchmarks.presets import (
 DEFAULT_RESULTS_DIR = Path("pcc_results") / "reproduce"
 RESULT_FORMAT = 1
 ORACLE = "oracle"
+#: Epochs between a run's training checkpoints: a run cut short (Ctrl-C, a crash, the end of
+#: a working session) resumes from its last one; at most this many epochs are redone.
+TRAIN_CHECKPOINT_EVERY = 5
 
 
 @dataclass(frozen=True)
@@ -118,6 +121,35 @@ def _save_figure_atomic(fig: Any, path: Path) -> None:
 def checkpoint_path(results_dir: str | Path, spec: RunSpec) -> Path:
     """Where a run's trained agent is saved (``PCCAgent.load`` reads it back)."""
     return Path(results_dir) / "checkpoints" / spec.relative_path.with_suffix(".pt")
+
+
+def training_checkpoint_path(results_dir: str | Path, spec: RunSpec) -> Path:
+    """Where a run's training in progress is checkpointed (removed once the run is done)."""
+    return checkpoint_path(results_dir, spec).with_suffix(".training.pt")
+
+
+def _resume_epoch(path: Path, train_config: Any) -> int | None:
+    """The epoch an interrupted training of this run continues from (None: start afresh).
+
+    A checkpoint of other training settings, a finished training (the run was killed during
+    its control tasks) or an unreadable file is deleted: the run trains from scratch.
+    """
+    from pcc_agent.checkpoint import CheckpointError, load_checkpoint
+
+    if not path.exists():
+        return None
+    wanted = json.loads(json.dumps(train_config.to_dict()))
+    try:
+        saved = load_checkpoint(path)
+        usable = (not saved.extra.get("finished")
+                  and saved.config.get("train_config") == wanted)
+    except CheckpointError:
+        usable = False
+    if usable:
+        return int(saved.extra.get("epochs", 0))
+    path.unlink(missing_ok=True)
+    path.with_suffix(".json").unlink(missing_ok=True)
+    return None
 
 
 def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any] | None:
@@ -241,8 +273,13 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
             env_kwargs=env_kwargs,
             data_cache_dir=data_dir,
         )
-        agent.learn(progress_bar=False)
+        in_progress = training_checkpoint_path(results_dir, spec)
+        resumed_at = _resume_epoch(in_progress, replace(preset.train, seed=spec.seed))
+        agent.learn(progress_bar=False, checkpoint_path=in_progress,
+                    resume=resumed_at is not None, checkpoint_every=TRAIN_CHECKPOINT_EVERY)
         record["train_seconds"] = time.perf_counter() - start
+        if resumed_at is not None:  # train_seconds counts only this process's epochs
+            record["training_resumed_at_epoch"] = resumed_at
         # The trained agent, for re-evaluation with other planner settings (not committed).
         agent.save(checkpoint_path(results_dir, spec))
         record["config"] = agent.config_dict()
@@ -256,6 +293,10 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     record["mean"] = evaluation.mean
     record["status"] = "done"
     _write_json_atomic(path, record)
+    if spec.method != ORACLE:  # the training is complete and its record written
+        in_progress = training_checkpoint_path(results_dir, spec)
+        in_progress.unlink(missing_ok=True)
+        in_progress.with_suffix(".json").unlink(missing_ok=True)
     return record
 
 

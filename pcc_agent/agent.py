@@ -250,6 +250,9 @@ class PCCAgent:
         reset_num_timesteps: bool = True,
         dataset: Any = None,
         tb_log_name: str = "PCC",
+        checkpoint_path: str | os.PathLike[str] | None = None,
+        resume: bool = False,
+        checkpoint_every: int = 1,
     ) -> PCCAgent:
         """Collect transitions, train the embedding, set the goal.
 
@@ -265,6 +268,13 @@ class PCCAgent:
             dataset: Train on these transitions instead of collecting: a
                 ``pcc_envs.data.TransitionDataset`` or a tuple ``(obs, action, next_obs)``.
             tb_log_name: Unused, SB3 compatibility.
+            checkpoint_path: Training checkpoint written atomically every ``checkpoint_every``
+                epochs (weights, optimizer and RNG state; see :class:`pcc_agent.training.Trainer`).
+                Not the agent file of :meth:`save`.
+            resume: Continue the training saved at ``checkpoint_path`` (if it exists) exactly
+                where it stopped: a training cut short (a crash, the end of a session) and
+                resumed gives the weights of an uninterrupted one.
+            checkpoint_every: Epochs between training checkpoints.
 
         Returns:
             self.
@@ -309,6 +319,9 @@ class PCCAgent:
             seed=self.seed,
             progress_bar=progress_bar,
             epoch_callback=on_epoch,
+            checkpoint_path=checkpoint_path,
+            resume=resume,
+            checkpoint_every=checkpoint_every,
         )
         if sb3_callback is not None:
             sb3_callback.on_training_end()

@@ -85,29 +85,67 @@ def test_finished_run_is_skipped_and_partial_run_redone(tmp_path):
     assert redone["percentages"] == record["percentages"]
 
 
-def test_run_killed_mid_training_is_redone(tmp_path):
-    """SIGKILL while the model trains: nothing counts as finished, the next call redoes it."""
+def test_run_killed_mid_training_resumes_to_the_uninterrupted_result(tmp_path):
+    """SIGKILL while the model trains: nothing counts as finished; the next call continues
+    from the last training checkpoint and ends where an uninterrupted run ends."""
     import signal
     import time
+
+    from benchmarks.reproduce import training_checkpoint_path
 
     spec = dataclasses.replace(tiny_spec(3), max_epochs=40, patience=40)
     data_dir = tmp_path / "data"
     code = (
-        "import sys; from benchmarks.reproduce import RunSpec, execute_run; "
+        "from benchmarks.reproduce import RunSpec, execute_run; "
         f"execute_run(RunSpec(**{dataclasses.asdict(spec)!r}), {str(tmp_path)!r}, "
         f"{str(data_dir)!r})"
     )
     child = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT)
-    deadline = time.monotonic() + 120
-    while not list(data_dir.glob("*.npz")):  # the data set is written just before training
-        assert child.poll() is None and time.monotonic() < deadline, "run ended before training"
-        time.sleep(0.02)
+    in_progress = training_checkpoint_path(tmp_path, spec)
+    deadline = time.monotonic() + 300
+    while not in_progress.exists():  # the first checkpoint, a few epochs into training
+        assert child.poll() is None and time.monotonic() < deadline, "run ended too soon"
+        time.sleep(0.01)
     child.send_signal(signal.SIGKILL)
     child.wait()
     path = tmp_path / spec.relative_path
     assert load_finished_run(path, spec) is None
-    redone = execute_run(spec, tmp_path, str(data_dir))
-    assert not redone.get("skipped") and load_finished_run(path, spec) is not None
+    resumed = execute_run(spec, tmp_path, str(data_dir))
+    assert not resumed.get("skipped") and load_finished_run(path, spec) is not None
+    assert 0 < resumed["training_resumed_at_epoch"] < 40
+    assert not in_progress.exists()  # removed once the run is done
+    straight = execute_run(spec, tmp_path / "straight", str(data_dir))
+    assert "training_resumed_at_epoch" not in straight
+    for key in ("epochs", "best_epoch", "best_validation_loss"):
+        assert resumed["training"][key] == straight["training"][key], key
+    assert resumed["percentages"] == straight["percentages"]
+
+
+def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_path):
+    from benchmarks.reproduce import _resume_epoch
+    from pcc_agent.checkpoint import load_checkpoint, save_checkpoint
+    from pcc_agent.model import EmbeddingModel
+    from pcc_agent.presets import get_preset
+    from pcc_agent.training import train_embedding
+
+    preset = get_preset("pcc/Planar-v0")
+    config = dataclasses.replace(preset.train, epochs=1, seed=0)
+    model = EmbeddingModel((1, 40, 40), 2, preset.model, seed=0)
+    obs = np.zeros((64, 1, 40, 40), np.uint8)
+    path = tmp_path / "seed0.training.pt"
+    train_embedding(model, (obs, np.zeros((64, 2), np.float32), obs), config,
+                    progress_bar=False, device="cpu", checkpoint_path=path)
+    saved = load_checkpoint(path)
+    # Finished: the run was killed during its control tasks; it trains again from scratch.
+    assert _resume_epoch(path, config) is None and not path.exists()
+    unfinished = {**saved.extra, "finished": False}
+    save_checkpoint(path, model, saved.config, extra=unfinished, state=saved.state)
+    assert _resume_epoch(path, dataclasses.replace(config, lr=1e-3)) is None
+    assert not path.exists()  # other training settings: never continued
+    save_checkpoint(path, model, saved.config, extra=unfinished, state=saved.state)
+    assert _resume_epoch(path, config) == 1
+    path.write_bytes(b"cut short")
+    assert _resume_epoch(path, config) is None and not path.exists()
 
 
 def test_aggregate_all_and_top1():
