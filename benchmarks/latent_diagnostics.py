@@ -1,0 +1,176 @@
+"""Which trained models control well, and why: latent diagnostics of every finished run.
+
+For every finished run of a reproduction results directory whose saved agent is still there
+(``checkpoints/``, written by ``benchmarks.reproduce``), this measures
+:func:`pcc_agent.diagnostics.latent_diagnostics` on held-out transitions. The transitions
+are the same for every model: the env's uniform sampler with a seed no model was trained
+on. It writes the results beside the run's control score and best validation loss, with
+Spearman rank correlations between each diagnostic and the control score, per method and
+over all methods. Nothing is retrained and no control task is rerun.
+
+Usage:
+    python -m benchmarks.latent_diagnostics --results-dir benchmarks/results/reproduce \
+        --preset paper-fast-long --env pcc/Planar-v0 \
+        --output benchmarks/results/latent_diagnostics/Planar-v0_paper-fast-long
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.reproduce import (
+    ORACLE,
+    RunSpec,
+    _write_json_atomic,
+    _write_text_atomic,
+    checkpoint_path,
+    load_records,
+)
+
+#: Seed of the held-out transitions (the grids train on seeds 0, 1, ...).
+HELD_OUT_SEED = 1_000_000
+DIAGNOSTICS = ("consistency_error", "curvature", "latent_scale", "best_validation_loss")
+
+
+def spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
+    """Spearman's rank correlation (ties get their mean rank); None when undefined."""
+    a, b = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if a.size < 3 or a.size != b.size:
+        return None
+    ranks = [_ranks(a), _ranks(b)]
+    if min(r.std() for r in ranks) == 0:
+        return None
+    return float(np.corrcoef(*ranks)[0, 1])
+
+
+def _ranks(values: np.ndarray) -> np.ndarray:
+    order = np.argsort(values, kind="stable")
+    ranks = np.empty(values.size)
+    ranks[order] = np.arange(values.size, dtype=np.float64)
+    for value in np.unique(values):  # ties share their mean rank
+        tied = values == value
+        ranks[tied] = ranks[tied].mean()
+    return ranks
+
+
+def diagnose_runs(
+    results_dir: Path, env_id: str, preset: str, num_samples: int = 1000
+) -> list[dict[str, Any]]:
+    """One row per finished model run of (env, preset) with a saved agent."""
+    import torch
+
+    from pcc_agent.agent import PCCAgent
+    from pcc_agent.diagnostics import latent_diagnostics
+    from pcc_envs.data import collect_transitions
+
+    torch.set_num_threads(1)
+    held_out: dict[float, Any] = {}
+    rows = []
+    for record in load_records(results_dir):
+        spec = RunSpec(**record["spec"])
+        if spec.method == ORACLE or spec.env_id != env_id or spec.preset != preset:
+            continue
+        agent_file = checkpoint_path(results_dir, spec)
+        if not agent_file.exists():
+            print(f"No saved agent for {spec.method} seed {spec.seed} ({agent_file}); skipped.")
+            continue
+        if spec.noise_std not in held_out:
+            held_out[spec.noise_std] = collect_transitions(
+                env_id, num_samples, HELD_OUT_SEED, noise_std=spec.noise_std)
+        data = held_out[spec.noise_std]
+        agent = PCCAgent.load(agent_file, device="cpu")
+        found = latent_diagnostics(agent.model, data.obs, data.action, data.next_obs)
+        rows.append({
+            "env": env_id, "preset": preset, "method": spec.method, "seed": spec.seed,
+            "noise_std": spec.noise_std, "percent_in_goal": float(record["mean"]),
+            "best_validation_loss": record.get("training", {}).get("best_validation_loss"),
+            **found.to_dict(),
+        })
+        print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
+              f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}",
+              flush=True)
+    return sorted(rows, key=lambda r: (r["method"], r["noise_std"], r["seed"]))
+
+
+def correlations(rows: list[dict[str, Any]]) -> dict[str, dict[str, float | None]]:
+    """Spearman correlation of each diagnostic with the control score, per method and all."""
+    groups: dict[str, list[dict[str, Any]]] = {"all methods": rows}
+    for row in rows:
+        groups.setdefault(row["method"], []).append(row)
+    out = {}
+    for name, members in groups.items():
+        score = [r["percent_in_goal"] for r in members]
+        out[name] = {"n_models": len(members)}
+        for key in DIAGNOSTICS:
+            pairs = [(r[key], s) for r, s in zip(members, score) if r[key] is not None]
+            out[name][key] = spearman(*zip(*pairs)) if pairs else None
+    return out
+
+
+def markdown(rows: list[dict[str, Any]], corr: dict[str, dict[str, float | None]]) -> str:
+    """The rows and the correlations as Markdown tables."""
+    lines = [
+        "| method | seed | % in goal | consistency error | curvature | latent scale "
+        "| best val. loss |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        val = "-" if r["best_validation_loss"] is None else f"{r['best_validation_loss']:.1f}"
+        lines.append(
+            f"| {r['method']} | {r['seed']} | {r['percent_in_goal']:.1f} "
+            f"| {r['consistency_error']:.4f} | {r['curvature']:.2e} | {r['latent_scale']:.2f} "
+            f"| {val} |"
+        )
+    lines += ["", "Spearman rank correlation with the % in goal:", "",
+              "| models | n | " + " | ".join(DIAGNOSTICS) + " |",
+              "|---|---|" + "---|" * len(DIAGNOSTICS)]
+    for name, values in corr.items():
+        cells = ["-" if values[k] is None else f"{values[k]:+.2f}" for k in DIAGNOSTICS]
+        lines.append(f"| {name} | {values['n_models']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface."""
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.latent_diagnostics", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("--results-dir", type=Path, required=True,
+                        help="A reproduction results directory (runs/ and checkpoints/).")
+    parser.add_argument("--env", default="pcc/Planar-v0", help="Env id of the runs.")
+    parser.add_argument("--preset", required=True, help="Preset name of the runs.")
+    parser.add_argument("--samples", type=int, default=1000, help="Held-out transitions.")
+    parser.add_argument("--output", type=Path, required=True,
+                        help="Output path without suffix: writes .json and .md.")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m benchmarks.latent_diagnostics``."""
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(arguments)
+    if args.samples < 2:
+        raise SystemExit(f"--samples must be at least 2, got {args.samples}.")
+    rows = diagnose_runs(args.results_dir, args.env, args.preset, args.samples)
+    if not rows:
+        raise SystemExit(f"No finished {args.env} runs of preset {args.preset!r} with a saved "
+                         f"agent under {args.results_dir}.")
+    corr = correlations(rows)
+    _write_json_atomic(Path(f"{args.output}.json"), {
+        "command": " ".join(["python -m benchmarks.latent_diagnostics", *arguments]),
+        "held_out_seed": HELD_OUT_SEED, "rows": rows, "spearman": corr,
+    })
+    text = markdown(rows, corr)
+    _write_text_atomic(Path(f"{args.output}.md"), text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,75 @@
+"""Latent diagnostics: exact values on a model with known dynamics, the CLI on a tiny grid."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from benchmarks import latent_diagnostics as cli
+from pcc_agent.diagnostics import latent_diagnostics
+from pcc_agent.model import EmbeddingModel
+from pcc_agent.presets import get_preset
+from pcc_envs.data import collect_transitions
+
+
+def planar_model() -> EmbeddingModel:
+    return EmbeddingModel((1, 40, 40), 2, get_preset("pcc/Planar-v0").model, seed=0)
+
+
+def test_identity_dynamics_are_consistent_and_flat():
+    """f(z, u) = z exactly: no curvature, and zero error when the observation does not move."""
+    model = planar_model()
+    with torch.no_grad():
+        model.dynamics.head.weight.zero_()
+        model.dynamics.head.bias.zero_()
+    data = collect_transitions("pcc/Planar-v0", 64, seed=0)
+    still = latent_diagnostics(model, data.obs, data.action, data.obs)
+    assert still.consistency_error == 0.0 and still.curvature == pytest.approx(0.0, abs=1e-12)
+    moved = latent_diagnostics(model, data.obs, data.action, data.next_obs)
+    assert moved.consistency_error > 0 and moved.latent_scale > 0 and moved.num_samples == 64
+
+
+def test_diagnostics_are_reproducible_and_check_their_input():
+    model = planar_model()
+    data = collect_transitions("pcc/Planar-v0", 40, seed=1)
+    first = latent_diagnostics(model, data.obs, data.action, data.next_obs, batch_size=16)
+    again = latent_diagnostics(model, data.obs, data.action, data.next_obs, batch_size=16)
+    assert first == again and first.curvature > 0
+    with pytest.raises(ValueError, match="same non-zero number"):
+        latent_diagnostics(model, data.obs, data.action[:3], data.next_obs)
+    with pytest.raises(ValueError, match="model expects"):
+        latent_diagnostics(model, data.obs[:, :, :20], data.action, data.next_obs[:, :, :20])
+    with pytest.raises(ValueError, match="Actions must be"):
+        latent_diagnostics(model, data.obs, data.action[:, :1], data.next_obs)
+
+
+def test_spearman_matches_known_values():
+    assert cli.spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
+    assert cli.spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
+    assert cli.spearman([1, 1, 2, 3], [0, 0, 5, 5]) == pytest.approx(np.corrcoef(
+        [0.5, 0.5, 2, 3], [0.5, 0.5, 2.5, 2.5])[0, 1])
+    assert cli.spearman([1, 2], [1, 2]) is None and cli.spearman([1, 1, 1], [1, 2, 3]) is None
+
+
+def test_cli_on_a_tiny_grid(tmp_path):
+    from benchmarks.reproduce import RunSpec, execute_run
+
+    for seed in (0, 1, 2):
+        spec = RunSpec(env_id="pcc/Planar-v0", method="pcc", seed=seed, noise_std=0.0,
+                       num_tasks=1, task_seed=7, model_variant="paper", preset="tiny",
+                       num_samples=128, max_epochs=1)
+        execute_run(spec, tmp_path, str(tmp_path / "data"))
+    out = tmp_path / "diag" / "Planar-v0_tiny"
+    assert cli.main(["--results-dir", str(tmp_path), "--preset", "tiny", "--samples", "50",
+                     "--output", str(out)]) == 0
+    result = json.loads(out.with_name(out.name + ".json").read_text())
+    assert [row["seed"] for row in result["rows"]] == [0, 1, 2]
+    assert result["spearman"]["pcc"]["n_models"] == 3
+    assert "--preset tiny" in result["command"]
+    assert "| pcc | 2 |" in out.with_name(out.name + ".md").read_text()
+    with pytest.raises(SystemExit, match="No finished"):
+        cli.main(["--results-dir", str(tmp_path), "--preset", "other", "--output", str(out)])
+
