@@ -42,6 +42,7 @@ from benchmarks.presets import (
     LATENT_MAP_MODELS,
     PAPER_RESULTS,
     REPRODUCE_PRESETS,
+    RESTART_SEED_STRIDE,
     ReproducePreset,
 )
 
@@ -352,7 +353,11 @@ def _has_oracle(env_id: str) -> bool:
 
 
 def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[RunSpec]:
-    """All runs of a preset, oracle runs first (one per env and noise level)."""
+    """All runs of a preset, oracle runs first (one per env and noise level).
+
+    A ``restarts`` preset's runs are its trainings, filed under ``preset.runs_preset``: the
+    first training of every model, then the second, and so on.
+    """
     runs: list[RunSpec] = []
     for env_id in preset.envs:
         for noise in preset.noise_levels_for(env_id):
@@ -362,11 +367,13 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[Ru
                 "num_tasks": preset.num_tasks,
                 "task_seed": preset.task_seed,
                 "model_variant": preset.model_variant,
-                "preset": preset.name,
+                "preset": preset.runs_preset,
             }
             if include_oracle and _has_oracle(env_id):
                 runs.append(RunSpec(method=ORACLE, seed=0, **common))
-            for seed in preset.seeds():
+            trainings = [m + k * RESTART_SEED_STRIDE for k in range(preset.restarts)
+                         for m in preset.seeds()]
+            for seed in trainings:
                 for method in preset.methods:
                     runs.append(
                         RunSpec(
@@ -559,11 +566,26 @@ def bootstrap_iqm_ci(
     return float(np.percentile(stats, 2.5)), float(np.percentile(stats, 97.5))
 
 
+def is_restart_training(spec: dict[str, Any]) -> bool:
+    """Whether a run is a second or later training of a ``restarts`` preset's model.
+
+    Such runs count only through :func:`select_restarts`, so that a preset's own rows keep
+    its models ``0 .. N-1``.
+    """
+    return int(spec.get("seed", 0)) >= RESTART_SEED_STRIDE
+
+
 def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Summary rows per (env, method, noise, preset) from run records."""
+    """Summary rows per (env, method, noise, preset) from run records.
+
+    Restart trainings (:func:`is_restart_training`) are left out: pass the records of
+    :func:`select_restarts` to get the rows of the ``restarts`` presets.
+    """
     groups: dict[tuple[str, str, float, str], list[dict[str, Any]]] = {}
     for rec in records:
         s = rec["spec"]
+        if is_restart_training(s):
+            continue
         groups.setdefault((s["env_id"], s["method"], s["noise_std"], s["preset"]), []).append(rec)
     oracle = {
         (k[0], k[2], k[3]): float(np.mean(v[0]["percentages"]))
@@ -699,6 +721,11 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
     for (env, preset, method), row in seen.items():
         s = row["settings"]
         p = s.get("planner", {})
+        registered = REPRODUCE_PRESETS.get(preset.split("+", 1)[0])
+        recipe = _training_recipe(s)
+        if registered is not None and registered.restarts > 1:
+            recipe += (f"; each model the best of {registered.restarts} trainings by "
+                       "validation loss")
         lines.append(
             f"| {env} | {preset} | {method} | {s.get('episode_length', '-')} "
             f"| {p.get('plan_length')} "
@@ -707,7 +734,7 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
             f"| [{p.get('action_low')}, {p.get('action_high')}] "
             f"| {s.get('data', {}).get('num_samples')} "
             f"| {row['n_tasks']} ({row.get('task_seed', '-')}) | {row['seeds']} "
-            f"| {TASK_STARTS.get(env, '-')} | {_training_recipe(s)} |"
+            f"| {TASK_STARTS.get(env, '-')} | {recipe} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -732,9 +759,53 @@ def load_records(results_dir: Path) -> list[dict[str, Any]]:
     return records
 
 
+def select_restarts(
+    records: Sequence[dict[str, Any]],
+    presets: Iterable[ReproducePreset] = REPRODUCE_PRESETS.values(),
+) -> list[dict[str, Any]]:
+    """The models of every ``restarts`` preset, chosen from its trainings' records.
+
+    Model ``m`` of (env, method, noise) exists once all of its trainings (seeds ``m + k *
+    RESTART_SEED_STRIDE``) are finished; it is the training with the lowest best validation
+    loss. Its record is that training's, filed under the restarts preset with seed ``m``,
+    the summed training time, and every training's validation loss and control score
+    (``restarts``) for the record.
+    """
+    selected = []
+    for preset in presets:
+        if preset.restarts <= 1:
+            continue
+        by_cell: dict[tuple[Any, ...], dict[int, dict[str, Any]]] = {}
+        for rec in records:
+            s = rec["spec"]
+            if s.get("preset") != preset.runs_preset or s["method"] == ORACLE:
+                continue
+            cell = (s["env_id"], s["method"], s["noise_std"], s["seed"] % RESTART_SEED_STRIDE)
+            by_cell.setdefault(cell, {})[s["seed"] // RESTART_SEED_STRIDE] = rec
+        for (_, _, _, model_seed), trainings in sorted(by_cell.items()):
+            if model_seed >= preset.num_models or sorted(trainings) != list(
+                    range(preset.restarts)):
+                continue
+            losses = {k: rec.get("training", {}).get("best_validation_loss")
+                      for k, rec in trainings.items()}
+            if any(loss is None for loss in losses.values()):
+                continue
+            best = trainings[min(losses, key=lambda k: (losses[k], k))]
+            selected.append({
+                **best,
+                "spec": {**best["spec"], "preset": preset.name, "seed": model_seed},
+                "selected_training_seed": best["spec"]["seed"],
+                "train_seconds": sum(float(r["train_seconds"]) for r in trainings.values()),
+                "restarts": [{"seed": r["spec"]["seed"], "best_validation_loss": losses[k],
+                              "mean": r["mean"]} for k, r in sorted(trainings.items())],
+            })
+    return selected
+
+
 def write_summary(results_dir: Path) -> list[dict[str, Any]]:
     """Aggregate the run files into summary.json, summary.md and a bar chart."""
-    rows = aggregate(load_records(results_dir))
+    records = load_records(results_dir)
+    rows = aggregate(records + select_restarts(records))
     if not rows:
         print("No finished runs to aggregate.")
         return rows
@@ -955,6 +1026,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.seeds:
             if min(args.seeds) < 0:
                 raise SystemExit(f"--seeds must be non-negative, got {args.seeds}.")
+            if preset.restarts > 1 and max(args.seeds) >= RESTART_SEED_STRIDE:
+                raise SystemExit(f"--seeds of a restarts preset must be below "
+                                 f"{RESTART_SEED_STRIDE}, got {args.seeds}.")
             changes["model_seeds"] = tuple(sorted(set(args.seeds)))
         if args.num_tasks is not None:
             changes["num_tasks"] = args.num_tasks

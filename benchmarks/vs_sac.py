@@ -55,7 +55,9 @@ from benchmarks.reproduce import (
     _save_figure_atomic,
     _write_json_atomic,
     _write_text_atomic,
+    is_restart_training,
     load_records,
+    select_restarts,
 )
 
 DEFAULT_RESULTS_DIR = Path("pcc_results") / "vs_sac"
@@ -325,9 +327,11 @@ def summarize(
             for steps, v in sorted(points.items())
         ]
     model_based: dict[str, Any] = {}
-    for rec in load_records(reproduce_dir) if reproduce_dir.exists() else []:
+    records = load_records(reproduce_dir) if reproduce_dir.exists() else []
+    for rec in records + select_restarts(records):
         spec = rec["spec"]
-        if spec["env_id"] != env_id or spec["noise_std"] != 0.0 or not same_tasks(rec):
+        if (spec["env_id"] != env_id or spec["noise_std"] != 0.0 or not same_tasks(rec)
+                or is_restart_training(spec)):
             continue
         # One point per (method, preset): "paper" and "paper-fast" runs are different models.
         entry = model_based.setdefault(

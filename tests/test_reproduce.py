@@ -379,3 +379,37 @@ def test_bad_command_line_is_refused_before_any_run(tmp_path, capsys, args, mess
         main([*args, "--results-dir", str(tmp_path)])
     assert message in capsys.readouterr().err + str(exit_info.value)
     assert not (tmp_path / "runs").exists()
+
+
+def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
+    from benchmarks.presets import REPRODUCE_PRESETS, RESTART_SEED_STRIDE
+    from benchmarks.reproduce import expand_grid, select_restarts
+
+    best3 = REPRODUCE_PRESETS["paper-fast-long-best3"].replace(
+        envs=("pcc/Planar-v0",), methods=("pcc",), model_seeds=(0, 1))
+    runs = expand_grid(best3, include_oracle=False)
+    # The trainings are ordinary paper-fast-long runs: seed 0 and 1 exist already there.
+    assert {r.preset for r in runs} == {"paper-fast-long"}
+    assert sorted(r.seed for r in runs) == [0, 1, 1000, 1001, 2000, 2001]
+    long_runs = expand_grid(REPRODUCE_PRESETS["paper-fast-long"].replace(
+        envs=("pcc/Planar-v0",), methods=("pcc",), model_seeds=(0,)), include_oracle=False)
+    assert runs[0] == long_runs[0]
+
+    def rec(seed, loss, mean):
+        return {"spec": {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0,
+                         "preset": "paper-fast-long", "seed": seed, "model_variant": "fast"},
+                "training": {"best_validation_loss": loss}, "percentages": [mean, mean],
+                "mean": mean, "train_seconds": 10.0}
+
+    stride = RESTART_SEED_STRIDE
+    records = [rec(0, 140.0, 20.0), rec(stride, 132.0, 75.0), rec(2 * stride, 150.0, 0.0),
+               rec(1, 133.0, 70.0), rec(1 + stride, 135.0, 74.0)]  # model 1: one missing
+    (model,) = select_restarts(records, [best3])
+    assert model["spec"]["preset"] == "paper-fast-long-best3" and model["spec"]["seed"] == 0
+    assert model["selected_training_seed"] == stride and model["mean"] == 75.0
+    assert model["train_seconds"] == 30.0 and len(model["restarts"]) == 3
+    rows = {r["preset"]: r for r in aggregate(records + [model])}
+    # The plain preset's row keeps its own models 0 and 1; restart trainings stay out of it.
+    assert rows["paper-fast-long"]["seeds"] == [0, 1]
+    assert rows["paper-fast-long-best3"]["mean_all"] == 75.0
+    assert rows["paper-fast-long-best3"]["n_models_planned"] == 10
