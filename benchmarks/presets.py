@@ -200,8 +200,10 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
                                            patience=100),
     # "paper-fast-long" with 3 trainings per model, keeping the one with the lowest best
     # validation loss (3x the training cost). On Planar the best validation loss ranks the
-    # PCC models' control (Spearman -0.72); the trainings of seed m are the paper-fast-long
-    # runs of seeds m, m + 1000 and m + 2000, so those already trained are reused.
+    # control of PCC models (Spearman -0.72; not of E2C or RCE models, about -0.1 and 0.0);
+    # the trainings of seed m are the paper-fast-long runs of seeds m, m + 1000 and m + 2000,
+    # so those already trained are reused. Each training is scored on its own validation
+    # split of its own data set.
     "paper-fast-long-best3": _PAPER_FAST.replace(name="paper-fast-long-best3", max_epochs=1000,
                                                  patience=100, restarts=3,
                                                  candidates_preset="paper-fast-long"),

@@ -25,6 +25,7 @@ import json
 import math
 import os
 import platform
+import signal
 import sys
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -129,11 +130,22 @@ def training_checkpoint_path(results_dir: str | Path, spec: RunSpec) -> Path:
     return checkpoint_path(results_dir, spec).with_suffix(".training.pt")
 
 
-def _resume_epoch(path: Path, train_config: Any) -> int | None:
-    """The epoch an interrupted training of this run continues from (None: start afresh).
+@dataclass(frozen=True)
+class ResumePoint:
+    """Where an interrupted training of a run continues: its epoch and the seconds spent."""
 
-    A checkpoint of other training settings, a finished training (the run was killed during
-    its control tasks) or an unreadable file is deleted: the run trains from scratch.
+    epoch: int
+    seconds: float
+
+
+def _resume_point(
+    path: Path, train_config: Any, architecture: dict[str, Any]
+) -> ResumePoint | None:
+    """Where an interrupted training of this run continues (None: start afresh).
+
+    A checkpoint of other training settings or another architecture, a finished training
+    (the run was killed during its control tasks) or an unreadable file is deleted: the run
+    trains from scratch.
     """
     from pcc_agent.checkpoint import CheckpointError, load_checkpoint
 
@@ -143,11 +155,14 @@ def _resume_epoch(path: Path, train_config: Any) -> int | None:
     try:
         saved = load_checkpoint(path)
         usable = (not saved.extra.get("finished")
-                  and saved.config.get("train_config") == wanted)
+                  and saved.config.get("train_config") == wanted
+                  and saved.architecture == json.loads(json.dumps(architecture)))
     except CheckpointError:
         usable = False
     if usable:
-        return int(saved.extra.get("epochs", 0))
+        history = saved.extra.get("history", [])
+        seconds = sum(float(row.get("time/epoch_seconds", 0.0)) for row in history)
+        return ResumePoint(int(saved.extra.get("epochs", 0)), seconds)
     path.unlink(missing_ok=True)
     path.with_suffix(".json").unlink(missing_ok=True)
     return None
@@ -259,6 +274,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         config = oracle_config_for(spec.env_id)
         record["config"] = {"oracle": asdict(config), "planner_revision": PLANNER_REVISION}
         record["train_seconds"] = 0.0
+        evaluation_start = time.perf_counter()
         evaluation = evaluate_control(
             lambda env: OracleController(env, config), spec.env_id, seeds, env_kwargs
         )
@@ -275,19 +291,22 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
             data_cache_dir=data_dir,
         )
         in_progress = training_checkpoint_path(results_dir, spec)
-        resumed_at = _resume_epoch(in_progress, replace(preset.train, seed=spec.seed))
+        resumed = _resume_point(in_progress, replace(preset.train, seed=spec.seed),
+                                agent.model.architecture())
         agent.learn(progress_bar=False, checkpoint_path=in_progress,
-                    resume=resumed_at is not None, checkpoint_every=TRAIN_CHECKPOINT_EVERY)
+                    resume=resumed is not None, checkpoint_every=TRAIN_CHECKPOINT_EVERY)
         record["train_seconds"] = time.perf_counter() - start
-        if resumed_at is not None:  # train_seconds counts only this process's epochs
-            record["training_resumed_at_epoch"] = resumed_at
+        if resumed is not None:  # add the epochs trained before the interruption
+            record["train_seconds"] += resumed.seconds
+            record["training_resumed_at_epoch"] = resumed.epoch
         # The trained agent, for re-evaluation with other planner settings (not committed).
         agent.save(checkpoint_path(results_dir, spec))
         record["config"] = agent.config_dict()
         record["training"] = agent.train_summary()
+        evaluation_start = time.perf_counter()
         evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
         _maybe_plot_latent_map(agent, spec, Path(results_dir))
-    record["eval_seconds"] = time.perf_counter() - start - record["train_seconds"]
+    record["eval_seconds"] = time.perf_counter() - evaluation_start
     record["task_seeds"] = seeds
     record["percentages"] = [t.percent_in_goal for t in evaluation.tasks]
     record["tasks"] = [t.to_dict() for t in evaluation.tasks]
@@ -395,6 +414,17 @@ def _worker_init() -> None:
     torch.set_num_threads(1)
 
 
+def _pool_worker_init() -> None:
+    """A pool worker ends at Ctrl-C (the terminal signals the whole process group).
+
+    Python's default would raise KeyboardInterrupt inside the run, which the pool reports as
+    that run's result before the worker takes the next queued run. The run's training
+    checkpoint is kept, so re-running the grid continues it.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    _worker_init()
+
+
 #: What a backend reports per run, in completion order: the record, or the run's error.
 Outcome = tuple[RunSpec, dict[str, Any] | Exception]
 
@@ -477,7 +507,7 @@ def pool_outcomes(
     If the consumer stops early (Ctrl-C, an error, ``close()``), the queued runs are
     cancelled instead of being trained silently before the program exits.
     """
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_pool_worker_init)
     futures: dict[Any, RunSpec] = {}
     try:
         futures = {pool.submit(run, spec, *args): spec for spec in todo}
@@ -769,7 +799,9 @@ def select_restarts(
     RESTART_SEED_STRIDE``) are finished; it is the training with the lowest best validation
     loss. Its record is that training's, filed under the restarts preset with seed ``m``,
     the summed training time, and every training's validation loss and control score
-    (``restarts``) for the record.
+    (``restarts``) for the record. Trainings run with command-line overrides (filed under
+    ``runs_preset + "+..."``) make the models of the overridden preset (``name + "+..."``).
+    Only trainings of the preset's recipe (variant, epoch cap, patience, tasks) count.
     """
     selected = []
     for preset in presets:
@@ -778,11 +810,17 @@ def select_restarts(
         by_cell: dict[tuple[Any, ...], dict[int, dict[str, Any]]] = {}
         for rec in records:
             s = rec["spec"]
-            if s.get("preset") != preset.runs_preset or s["method"] == ORACLE:
+            filed = str(s.get("preset", ""))
+            if s["method"] == ORACLE or not (
+                    filed == preset.runs_preset or filed.startswith(preset.runs_preset + "+")):
                 continue
-            cell = (s["env_id"], s["method"], s["noise_std"], s["seed"] % RESTART_SEED_STRIDE)
+            overrides = filed[len(preset.runs_preset):]
+            if not overrides and not _is_training_of(s, preset):
+                continue
+            cell = (preset.name + overrides, s["env_id"], s["method"], s["noise_std"],
+                    s["seed"] % RESTART_SEED_STRIDE)
             by_cell.setdefault(cell, {})[s["seed"] // RESTART_SEED_STRIDE] = rec
-        for (_, _, _, model_seed), trainings in sorted(by_cell.items()):
+        for (label, _, _, _, model_seed), trainings in sorted(by_cell.items()):
             if model_seed >= preset.num_models or sorted(trainings) != list(
                     range(preset.restarts)):
                 continue
@@ -793,13 +831,25 @@ def select_restarts(
             best = trainings[min(losses, key=lambda k: (losses[k], k))]
             selected.append({
                 **best,
-                "spec": {**best["spec"], "preset": preset.name, "seed": model_seed},
+                "spec": {**best["spec"], "preset": label, "seed": model_seed},
                 "selected_training_seed": best["spec"]["seed"],
                 "train_seconds": sum(float(r["train_seconds"]) for r in trainings.values()),
                 "restarts": [{"seed": r["spec"]["seed"], "best_validation_loss": losses[k],
                               "mean": r["mean"]} for k, r in sorted(trainings.items())],
             })
     return selected
+
+
+def _is_training_of(spec: dict[str, Any], preset: ReproducePreset) -> bool:
+    """Whether a run record's spec follows ``preset``'s recipe (no override)."""
+    return (
+        spec.get("model_variant") == preset.model_variant
+        and spec.get("num_tasks", preset.num_tasks) == preset.num_tasks
+        and spec.get("task_seed", preset.task_seed) == preset.task_seed
+        and spec.get("max_epochs") == preset.max_epochs
+        and spec.get("patience") == preset.patience
+        and spec.get("num_samples") == preset.num_samples.get(spec.get("env_id", ""))
+    )
 
 
 def write_summary(results_dir: Path) -> list[dict[str, Any]]:
@@ -948,6 +998,13 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _non_negative_float(text: str) -> float:
+    value = float(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
 def _known_envs() -> list[str]:
     from pcc_agent.presets import PRESETS
 
@@ -998,7 +1055,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--backend", choices=("process", "ray"), default="process")
     parser.add_argument("--ray-address", default=None, help="Ray cluster address (e.g. 'auto').")
     parser.add_argument(
-        "--ray-gpus-per-task", type=float, default=0.0,
+        "--ray-gpus-per-task", type=_non_negative_float, default=0.0,
         help="GPUs Ray reserves for each run (e.g. 1, or 0.25 to share a GPU among four "
         "runs); with 0 (default) Ray hides the GPUs from the runs, which then train on CPU.",
     )
@@ -1022,13 +1079,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.methods:
             changes["methods"] = tuple(args.methods)
         if args.num_models is not None:
+            if args.num_models > RESTART_SEED_STRIDE:
+                raise SystemExit(f"--num-models must be at most {RESTART_SEED_STRIDE}, got "
+                                 f"{args.num_models}.")
             changes["num_models"] = args.num_models
         if args.seeds:
             if min(args.seeds) < 0:
                 raise SystemExit(f"--seeds must be non-negative, got {args.seeds}.")
-            if preset.restarts > 1 and max(args.seeds) >= RESTART_SEED_STRIDE:
-                raise SystemExit(f"--seeds of a restarts preset must be below "
-                                 f"{RESTART_SEED_STRIDE}, got {args.seeds}.")
+            if max(args.seeds) >= RESTART_SEED_STRIDE:
+                raise SystemExit(f"--seeds must be below {RESTART_SEED_STRIDE} (larger seeds "
+                                 f"are the restart trainings of a restarts preset), got "
+                                 f"{args.seeds}.")
             changes["model_seeds"] = tuple(sorted(set(args.seeds)))
         if args.num_tasks is not None:
             changes["num_tasks"] = args.num_tasks

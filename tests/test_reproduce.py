@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -122,7 +123,7 @@ def test_run_killed_mid_training_resumes_to_the_uninterrupted_result(tmp_path):
 
 
 def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_path):
-    from benchmarks.reproduce import _resume_epoch
+    from benchmarks.reproduce import _resume_point
     from pcc_agent.checkpoint import load_checkpoint, save_checkpoint
     from pcc_agent.model import EmbeddingModel
     from pcc_agent.presets import get_preset
@@ -131,21 +132,30 @@ def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_pa
     preset = get_preset("pcc/Planar-v0")
     config = dataclasses.replace(preset.train, epochs=1, seed=0)
     model = EmbeddingModel((1, 40, 40), 2, preset.model, seed=0)
+    arch = model.architecture()
     obs = np.zeros((64, 1, 40, 40), np.uint8)
     path = tmp_path / "seed0.training.pt"
     train_embedding(model, (obs, np.zeros((64, 2), np.float32), obs), config,
                     progress_bar=False, device="cpu", checkpoint_path=path)
     saved = load_checkpoint(path)
     # Finished: the run was killed during its control tasks; it trains again from scratch.
-    assert _resume_epoch(path, config) is None and not path.exists()
+    assert _resume_point(path, config, arch) is None and not path.exists()
     unfinished = {**saved.extra, "finished": False}
-    save_checkpoint(path, model, saved.config, extra=unfinished, state=saved.state)
-    assert _resume_epoch(path, dataclasses.replace(config, lr=1e-3)) is None
+
+    def write_unfinished():
+        save_checkpoint(path, model, saved.config, extra=unfinished, state=saved.state)
+
+    write_unfinished()
+    assert _resume_point(path, dataclasses.replace(config, lr=1e-3), arch) is None
     assert not path.exists()  # other training settings: never continued
-    save_checkpoint(path, model, saved.config, extra=unfinished, state=saved.state)
-    assert _resume_epoch(path, config) == 1
+    write_unfinished()
+    wider = {**arch, "model_config": {**arch["model_config"], "encoder_hidden": [512, 512]}}
+    assert _resume_point(path, config, wider) is None and not path.exists()
+    write_unfinished()
+    point = _resume_point(path, config, arch)
+    assert point.epoch == 1 and point.seconds > 0
     path.write_bytes(b"cut short")
-    assert _resume_epoch(path, config) is None and not path.exists()
+    assert _resume_point(path, config, arch) is None and not path.exists()
 
 
 def test_aggregate_all_and_top1():
@@ -270,17 +280,17 @@ def test_cost_estimate_uses_finished_runs_of_the_same_kind():
     assert estimate_cost([longer], finished).runs_from_records == 0
 
 
-def _sleepy_run(spec: RunSpec, marker_dir: Path) -> dict:
+def _sleepy_run(spec: RunSpec, marker_dir: str | Path, seconds: float = 0.3) -> dict:
     """A stand-in run for the pool tests: leaves a marker, takes a moment."""
     import time
 
-    (marker_dir / f"{spec.seed}").write_text("started")
-    time.sleep(0.3)
+    (Path(marker_dir) / f"{spec.seed}").write_text("started")
+    time.sleep(seconds)
     return {"seed": spec.seed}
 
 
 def test_stopping_the_pool_cancels_queued_runs(tmp_path):
-    """Ctrl-C (any early stop of the consumer) must not train the rest of the grid."""
+    """An error or close() in the consumer must not train the rest of the grid."""
     import time
 
     from benchmarks.reproduce import pool_outcomes
@@ -290,12 +300,40 @@ def test_stopping_the_pool_cancels_queued_runs(tmp_path):
     spec, first = next(outcomes)
     assert first == {"seed": spec.seed}
     start = time.perf_counter()
-    outcomes.close()  # what a KeyboardInterrupt in the consumer does
-    assert time.perf_counter() - start < 1.0  # did not wait for the queue
+    outcomes.close()
+    assert time.perf_counter() - start < 2.0  # did not wait for the queue
     time.sleep(1.5)  # the few runs already handed to the workers have finished by now
     # At most: the finished one, one per worker, and the pool's small hand-over queue.
     started = len(list(tmp_path.iterdir()))
     assert started <= 8, f"{started} of 16 runs started although the grid was stopped"
+
+
+def test_ctrl_c_stops_the_grid_at_once(tmp_path):
+    """SIGINT to the process group (a terminal's Ctrl-C): workers end, nothing new starts."""
+    import signal
+    import time
+
+    markers = tmp_path / "markers"
+    markers.mkdir()
+    code = (
+        "import sys; sys.path.insert(0, 'tests'); from test_reproduce import _sleepy_run, "
+        "tiny_spec; from benchmarks.reproduce import collect_outcomes, pool_outcomes; "
+        "specs = [tiny_spec(s) for s in range(8)]; "
+        f"collect_outcomes(pool_outcomes(_sleepy_run, specs, 2, {str(markers)!r}, 5.0), 8)"
+    )
+    child = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while len(list(markers.iterdir())) < 2:  # both workers are in their first run
+        assert child.poll() is None and time.monotonic() < deadline, child.stderr.read()
+        time.sleep(0.02)
+    start = time.monotonic()
+    os.killpg(child.pid, signal.SIGINT)
+    child.wait(timeout=30)
+    assert time.monotonic() - start < 4.0, "the driver waited for the runs in progress"
+    assert child.returncode != 0
+    time.sleep(1.0)
+    assert len(list(markers.iterdir())) == 2, "runs started after Ctrl-C"
 
 
 def test_failed_run_is_reported_after_the_others_and_driver_writes_records(tmp_path):
@@ -370,7 +408,9 @@ def test_oracle_record_of_other_oracle_settings_is_stale(tmp_path):
     [(["--methods", "pcc", "ppo"], "invalid choice: 'ppo'"),
      (["--envs", "pcc/Nope-v0"], "invalid choice: 'pcc/Nope-v0'"),
      (["--num-tasks", "0"], "must be at least 1"),
-     (["--noise", "-1"], "--noise levels must be >= 0")],
+     (["--noise", "-1"], "--noise levels must be >= 0"),
+     (["--seeds", "3", "1000"], "--seeds must be below 1000"),
+     (["--ray-gpus-per-task", "-1"], "must be >= 0")],
 )
 def test_bad_command_line_is_refused_before_any_run(tmp_path, capsys, args, message):
     from benchmarks.reproduce import main
@@ -395,9 +435,10 @@ def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
         envs=("pcc/Planar-v0",), methods=("pcc",), model_seeds=(0,)), include_oracle=False)
     assert runs[0] == long_runs[0]
 
-    def rec(seed, loss, mean):
+    def rec(seed, loss, mean, preset="paper-fast-long", max_epochs=1000):
         return {"spec": {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0,
-                         "preset": "paper-fast-long", "seed": seed, "model_variant": "fast"},
+                         "preset": preset, "seed": seed, "model_variant": "fast",
+                         "max_epochs": max_epochs, "patience": 100},
                 "training": {"best_validation_loss": loss}, "percentages": [mean, mean],
                 "mean": mean, "train_seconds": 10.0}
 
@@ -413,3 +454,14 @@ def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
     assert rows["paper-fast-long"]["seeds"] == [0, 1]
     assert rows["paper-fast-long-best3"]["mean_all"] == 75.0
     assert rows["paper-fast-long-best3"]["n_models_planned"] == 10
+    # A training of another recipe filed under the plain name (older code) is not a candidate.
+    off_recipe = [rec(1 + 2 * stride, 100.0, 75.0, max_epochs=5)]
+    assert len(select_restarts(records + off_recipe, [best3])) == 1
+    # Trainings run with an override make the models of the overridden restarts preset.
+    short = [rec(k * stride, 140.0 - k, 10.0 * k, "paper-fast-long+max_epochs=5", 5)
+             for k in range(3)]
+    (overridden,) = select_restarts(short, [best3])
+    assert overridden["spec"]["preset"] == "paper-fast-long-best3+max_epochs=5"
+    assert overridden["mean"] == 20.0
+    assert best3.override(max_epochs=5).name == "paper-fast-long-best3+max_epochs=5"
+    assert best3.override(max_epochs=5).runs_preset == "paper-fast-long+max_epochs=5"

@@ -104,6 +104,5 @@ def test_model_based_points_on_other_tasks_are_left_out(tmp_path):
              "spec": {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0,
                       "preset": "paper"}, "config": {"data": {"num_samples": 5000}}},
         )
-    (tmp_path / "runs" / "broken.json").write_text('{"format": 1, "sta')  # a killed write
     points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])["model_based"]
     assert points["pcc (paper)"]["mean"] == 20.0 and points["pcc (paper)"]["n_tasks"] == 2
