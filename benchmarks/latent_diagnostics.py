@@ -1,6 +1,6 @@
 """Which trained models control well, and why: latent diagnostics of every finished run.
 
-For every finished run of a reproduction results directory whose saved agent is still there
+For every finished model run of a reproduction results directory whose saved agent is still there
 (``checkpoints/``, written by ``benchmarks.reproduce``), this measures
 :func:`pcc_agent.diagnostics.latent_diagnostics` on held-out transitions. The transitions
 are the same for every model: the env's uniform sampler with a seed no model was trained
@@ -30,6 +30,7 @@ from benchmarks.reproduce import (
     _write_json_atomic,
     _write_text_atomic,
     checkpoint_path,
+    is_restart_training,
     load_records,
 )
 
@@ -74,7 +75,8 @@ def diagnose_runs(
     rows = []
     for record in load_records(results_dir):
         spec = RunSpec(**record["spec"])
-        if spec.method == ORACLE or spec.env_id != env_id or spec.preset != preset:
+        if (spec.method == ORACLE or spec.env_id != env_id or spec.preset != preset
+                or is_restart_training(record["spec"])):  # the grid's models 0 .. N-1 only
             continue
         agent_file = checkpoint_path(results_dir, spec)
         if not agent_file.exists():
