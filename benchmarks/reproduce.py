@@ -107,10 +107,9 @@ def _write_json_atomic(path: Path, payload: Any) -> None:
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + f".{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    from pcc_agent.checkpoint import atomic_write_text
+
+    atomic_write_text(text, path)
 
 
 def _save_figure_atomic(fig: Any, path: Path) -> None:
@@ -163,9 +162,14 @@ def _resume_point(
         history = saved.extra.get("history", [])
         seconds = sum(float(row.get("time/epoch_seconds", 0.0)) for row in history)
         return ResumePoint(int(saved.extra.get("epochs", 0)), seconds)
+    _remove_training_checkpoint(path)
+    return None
+
+
+def _remove_training_checkpoint(path: Path) -> None:
+    """Delete a training checkpoint and the JSON copy of its configuration beside it."""
     path.unlink(missing_ok=True)
     path.with_suffix(".json").unlink(missing_ok=True)
-    return None
 
 
 def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any] | None:
@@ -314,9 +318,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     record["status"] = "done"
     _write_json_atomic(path, record)
     if spec.method != ORACLE:  # the training is complete and its record written
-        in_progress = training_checkpoint_path(results_dir, spec)
-        in_progress.unlink(missing_ok=True)
-        in_progress.with_suffix(".json").unlink(missing_ok=True)
+        _remove_training_checkpoint(training_checkpoint_path(results_dir, spec))
     return record
 
 
@@ -642,7 +644,7 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         def se(x: np.ndarray) -> float:
             return float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
 
-        planned = REPRODUCE_PRESETS.get(preset.split("+", 1)[0])
+        planned = _registered_preset(preset)
         row: dict[str, Any] = {
             "env": env_id,
             "method": method,
@@ -675,6 +677,11 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         row["paper_top1"] = list(paper["top1"]) if paper and "top1" in paper else None
         rows.append(row)
     return rows
+
+
+def _registered_preset(label: str) -> ReproducePreset | None:
+    """The registered preset behind a row label such as ``"paper+max_epochs=5"``."""
+    return REPRODUCE_PRESETS.get(label.split("+", 1)[0])
 
 
 def _fmt(pair: Sequence[float] | None) -> str:
@@ -751,7 +758,7 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
     for (env, preset, method), row in seen.items():
         s = row["settings"]
         p = s.get("planner", {})
-        registered = REPRODUCE_PRESETS.get(preset.split("+", 1)[0])
+        registered = _registered_preset(preset)
         recipe = _training_recipe(s)
         if registered is not None and registered.restarts > 1:
             recipe += (f"; each model the best of {registered.restarts} trainings by "
