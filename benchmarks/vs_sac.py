@@ -9,9 +9,12 @@ read from the reproduction pipeline's run files for the same env and task seeds;
 tasks are left out, and an oracle missing there is run here (``runs/<env>/oracle.json``).
 
 Every (env, policy, reward, budget, seed) run writes one JSON file,
-``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json`` (resumable: finished
-runs are skipped). Runs with different budgets are different agents (SAC's ``learning_starts``
-and buffer depend on the budget), so each budget has its own learning curve in the outputs.
+``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json``. Finished runs are
+skipped, and a run cut short (Ctrl-C, a crash, the end of a session) continues from its
+training state, saved beside the record every ``--save-every`` steps and after every
+evaluation (``seed<seed>.state.pt``, see :mod:`benchmarks.sac_state`). Runs with different
+budgets are different agents (SAC's ``learning_starts`` and buffer depend on the budget), so
+each budget has its own learning curve in the outputs.
 
 Reward: SAC learns from the env's reward, the model-based methods from none (their planner
 has the paper's quadratic latent cost). ``--reward sparse`` (default) pays 1 per step in the
@@ -49,9 +52,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from benchmarks import sac_state
 from benchmarks.presets import REPRODUCE_PRESETS
 from benchmarks.reproduce import (
     ORACLE,
+    _positive_int,
     _save_figure_atomic,
     _write_json_atomic,
     _write_text_atomic,
@@ -63,6 +68,8 @@ from benchmarks.reproduce import (
 DEFAULT_RESULTS_DIR = Path("pcc_results") / "vs_sac"
 DEFAULT_REPRODUCE_DIR = Path("pcc_results") / "reproduce"
 FORMAT = 1
+#: Environment steps between two saves of a SAC run's training state (besides evaluations).
+DEFAULT_SAVE_EVERY = 2500
 
 
 class TrueStateObservation(gym.ObservationWrapper):
@@ -151,8 +158,15 @@ def run_sac(
     buffer_size: int,
     results_dir: Path,
     reward: str,
+    save_every: int = DEFAULT_SAVE_EVERY,
 ) -> dict[str, Any]:
-    """Train one SAC agent, evaluating it at every checkpoint; write and return its record."""
+    """Train one SAC agent, evaluating it at every checkpoint; write and return its record.
+
+    The training state is saved every ``save_every`` environment steps and after every
+    evaluation (:mod:`benchmarks.sac_state`); a run that was cut short continues from its last
+    state, and the state file is removed once the record is written.
+    """
+    import stable_baselines3
     import torch
     from stable_baselines3 import SAC
     from stable_baselines3.common.callbacks import BaseCallback
@@ -162,32 +176,59 @@ def run_sac(
 
     if reward not in REWARDS:
         raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
+    if save_every < 1:
+        raise ValueError(f"save_every must be at least 1 step, got {save_every}")
     path = sac_run_path(results_dir, env_id, observation, steps, seed, reward)
     wanted = sorted({c for c in checkpoints if c <= steps} | {steps})
     record = load_finished_sac_run(path, steps, wanted, task_seed_list, reward)
     if record is not None:
         return record
     policy = "CnnPolicy" if observation == "image" else "MlpPolicy"
+    settings = {
+        "env_id": env_id, "policy": policy, "observation": observation, "reward": reward,
+        "seed": seed, "steps": steps, "checkpoints": list(wanted),
+        "task_seeds": list(task_seed_list), "buffer_size": min(buffer_size, steps),
+        "learning_starts": min(1000, steps // 10),
+        "stable_baselines3": stable_baselines3.__version__,
+    }
     env = make_env(env_id, observation, reward)
     model = SAC(
         policy,
         env,
-        buffer_size=min(buffer_size, steps),
-        learning_starts=min(1000, steps // 10),
+        buffer_size=settings["buffer_size"],
+        learning_starts=settings["learning_starts"],
         seed=seed,
         device="auto",
         verbose=0,
     )
+    state_file = sac_state.state_path(path)
+    state = sac_state.load_state(state_file, settings)
     curve: list[dict[str, Any]] = []
+    earlier_seconds, resumed_at, steps_done = 0.0, [], 0
+    if state is not None:
+        sac_state.restore_state(model, state)
+        curve, earlier_seconds = state["curve"], state["train_seconds"]
+        steps_done = state["steps_done"]
+        resumed_at = [*state["resumed_at"], steps_done]
+        # Fresh random streams for the rest of the run, deterministic given the resume point.
+        model.set_random_seed(seed + steps_done)
+        print(f"Resuming SAC({observation}) seed {seed} on {env_id} at {steps_done} steps.")
+    wanted = [c for c in wanted if c not in {point["env_steps"] for point in curve}]
 
-    bar = tqdm(total=steps, unit="step", desc=f"SAC {observation} seed {seed}")
+    bar = tqdm(total=steps, initial=steps_done, unit="step",
+               desc=f"SAC {observation} seed {seed}")
+    start = time.perf_counter()
 
-    class EvalAtCheckpoints(BaseCallback):
+    class EvalAndSave(BaseCallback):
+        # Called after each env step, before its transition is stored and trained on: the
+        # model and buffer then hold num_timesteps - 1 fully processed steps.
         def _on_step(self) -> bool:
             bar.update(self.num_timesteps - bar.n)
+            evaluated = False
             if wanted and self.num_timesteps >= wanted[0]:
                 wanted.pop(0)
-                start = time.perf_counter()
+                evaluated = True
+                eval_start = time.perf_counter()
                 ev = evaluate_control(
                     lambda e: make_policy_view(self.model, e, observation),
                     env_id,
@@ -200,18 +241,22 @@ def run_sac(
                         "percentages": ev.percentages.tolist(),
                         "mean": ev.mean,
                         "se": ev.standard_error,
-                        "eval_seconds": time.perf_counter() - start,
+                        "eval_seconds": time.perf_counter() - eval_start,
                     }
                 )
                 bar.write(
                     f"  {env_id} SAC({observation}) seed {seed} @ {self.num_timesteps} steps: "
                     f"{ev.mean:.1f}% in goal"
                 )
+            processed = self.num_timesteps - 1
+            if wanted and (evaluated or (processed > steps_done and processed % save_every == 0)):
+                sac_state.save_state(state_file, self.model, processed, settings, curve,
+                                     earlier_seconds + time.perf_counter() - start, resumed_at)
             return True
 
-    start = time.perf_counter()
     with bar:
-        model.learn(total_timesteps=steps, callback=EvalAtCheckpoints())
+        model.learn(total_timesteps=steps - steps_done, callback=EvalAndSave(),
+                    reset_num_timesteps=state is None)
     record = {
         "format": FORMAT,
         "status": "done",
@@ -221,8 +266,9 @@ def run_sac(
         "reward": reward,
         "seed": seed,
         "steps": steps,
-        "buffer_size": min(buffer_size, steps),
-        "train_seconds": time.perf_counter() - start,
+        "buffer_size": settings["buffer_size"],
+        "train_seconds": earlier_seconds + time.perf_counter() - start,
+        "resumed_at_steps": resumed_at,
         "curve": curve,
         "task_seeds": list(task_seed_list),
         "torch_threads": torch.get_num_threads(),
@@ -230,6 +276,7 @@ def run_sac(
         "command": " ".join(sys.argv),
     }
     _write_json_atomic(path, record)
+    state_file.unlink(missing_ok=True)
     return record
 
 
@@ -434,7 +481,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m benchmarks.vs_sac", description=__doc__.split("\n\n")[0]
     )
     parser.add_argument("--env", default="pcc/Planar-v0", help="Registered env id.")
-    parser.add_argument("--steps", type=int, default=100_000, help="SAC environment steps.")
+    parser.add_argument("--steps", type=_positive_int, default=100_000,
+                        help="SAC environment steps.")
     parser.add_argument(
         "--checkpoints",
         type=int,
@@ -461,6 +509,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--buffer-size", type=int, default=100_000,
         help="Replay buffer in transitions (100,000 80x80x2 transitions take about 2.6 GB).",
+    )
+    parser.add_argument(
+        "--save-every", type=_positive_int, default=DEFAULT_SAVE_EVERY,
+        help="Environment steps between saves of a run's training state (also saved after "
+        "every evaluation); a run cut short continues from its last state.",
     )
     parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
     parser.add_argument(
@@ -503,6 +556,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     args.buffer_size,
                     args.results_dir,
                     args.reward,
+                    args.save_every,
                 )
     summary = summarize(args.env, args.results_dir, args.reproduce_dir, seeds)
     write_outputs(summary, args.results_dir)

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import json
 
-from benchmarks import vs_sac
+import numpy as np
+import pytest
+import torch
+
+from benchmarks import sac_state, vs_sac
 
 
 def test_vs_sac_tiny_budget(tmp_path):
@@ -106,3 +110,86 @@ def test_model_based_points_on_other_tasks_are_left_out(tmp_path):
         )
     points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])["model_based"]
     assert points["pcc (paper)"]["mean"] == 20.0 and points["pcc (paper)"]["n_tasks"] == 2
+
+
+def _tiny_state_run(tmp_path, **kwargs):
+    return vs_sac.run_sac("pcc/Planar-v0", "state", 0, 120, [40, 80], [7], 500,
+                          tmp_path, "sparse", save_every=30, **kwargs)
+
+
+def test_sac_run_cut_short_continues_from_its_state(tmp_path, monkeypatch):
+    import pcc_agent.evaluation
+
+    real_evaluate = pcc_agent.evaluation.evaluate_control
+    calls = []
+
+    def evaluate_then_interrupt(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # the second evaluation (80 steps) is cut short
+        return real_evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(pcc_agent.evaluation, "evaluate_control", evaluate_then_interrupt)
+    record_path = vs_sac.sac_run_path(tmp_path, "pcc/Planar-v0", "state", 120, 0, "sparse")
+    state_file = sac_state.state_path(record_path)
+    with pytest.raises(KeyboardInterrupt):
+        _tiny_state_run(tmp_path)
+    assert not record_path.exists()
+    saved = torch.load(state_file, weights_only=True)
+    # Saved after the evaluation at 40 steps and at 60 processed steps; not at the cut.
+    assert saved["steps_done"] == 60
+    assert [p["env_steps"] for p in saved["curve"]] == [40]
+
+    monkeypatch.setattr(pcc_agent.evaluation, "evaluate_control", real_evaluate)
+    record = _tiny_state_run(tmp_path)
+    assert record["resumed_at_steps"] == [60]
+    # The evaluation at 40 steps is kept, not repeated; 80 and 120 are made by the resumed run.
+    assert [p["env_steps"] for p in record["curve"]] == [40, 80, 120]
+    assert record["curve"][0] == saved["curve"][0]
+    assert record["train_seconds"] >= saved["train_seconds"]
+    assert record_path.exists() and not state_file.exists()
+
+
+def test_sac_state_restores_weights_buffer_and_counters(tmp_path):
+    from stable_baselines3 import SAC
+
+    env = vs_sac.make_env("pcc/Planar-v0", "state", "sparse")
+    model = SAC("MlpPolicy", env, buffer_size=200, learning_starts=10, seed=0, device="cpu")
+    model.learn(total_timesteps=50)
+    settings = {"seed": 0, "steps": 100}
+    path = tmp_path / "run.state.pt"
+    sac_state.save_state(path, model, 50, settings, [{"env_steps": 25, "mean": 1.0}], 2.5, [])
+
+    fresh = SAC("MlpPolicy", vs_sac.make_env("pcc/Planar-v0", "state", "sparse"),
+                buffer_size=200, learning_starts=10, seed=1, device="cpu")
+    state = sac_state.load_state(path, settings)
+    sac_state.restore_state(fresh, state)
+    for name, params in model.get_parameters()["policy"].items():
+        assert torch.equal(params, fresh.get_parameters()["policy"][name]), name
+    assert torch.equal(model.log_ent_coef, fresh.log_ent_coef)
+    critic_opt = model.critic.optimizer.state_dict()["state"]
+    fresh_opt = fresh.critic.optimizer.state_dict()["state"]
+    assert all(torch.equal(critic_opt[k]["exp_avg"], fresh_opt[k]["exp_avg"]) for k in critic_opt)
+    buffer, restored = model.replay_buffer, fresh.replay_buffer
+    assert restored.pos == buffer.pos == 50 and not restored.full
+    for name in ("observations", "next_observations", "actions", "rewards", "dones"):
+        assert np.array_equal(getattr(buffer, name), getattr(restored, name)), name
+    assert (fresh.num_timesteps, fresh._n_updates) == (50, model._n_updates)
+
+
+def test_sac_state_of_other_settings_or_unreadable_is_discarded(tmp_path):
+    from stable_baselines3 import SAC
+
+    model = SAC("MlpPolicy", vs_sac.make_env("pcc/Planar-v0", "state", "sparse"),
+                buffer_size=50, seed=0, device="cpu")
+    path = tmp_path / "run.state.pt"
+    sac_state.save_state(path, model, 0, {"seed": 0}, [], 0.0, [])
+    assert sac_state.load_state(path, {"seed": 1}) is None
+    assert not path.exists()
+    path.write_bytes(b"not a torch file")
+    assert sac_state.load_state(path, {"seed": 0}) is None
+    assert not path.exists()
+    assert sac_state.load_state(path, {"seed": 0}) is None  # missing
+    with pytest.raises(ValueError, match="save_every"):
+        vs_sac.run_sac("pcc/Planar-v0", "state", 0, 10, [], [7], 50, tmp_path, "sparse",
+                       save_every=0)
