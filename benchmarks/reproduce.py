@@ -525,8 +525,7 @@ def pool_outcomes(
         for future in futures:
             future.cancel()
         pool.shutdown(wait=False, cancel_futures=True)
-        print("Stopped: queued runs cancelled; finished runs are kept, re-run to continue.",
-              file=sys.stderr, flush=True)
+        print("Stopped: queued runs cancelled.", file=sys.stderr, flush=True)
         raise
     pool.shutdown()
 
@@ -1126,8 +1125,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         if preset.name != args.preset:
             print(f"The overrides change what the runs compute: their files and rows are "
                   f"labelled {preset.name!r}.")
-        run_grid(runs, results_dir, args.workers, args.backend, args.ray_address,
-                 args.data_dir, args.ray_gpus_per_task)
+        try:
+            run_grid(runs, results_dir, args.workers, args.backend, args.ray_address,
+                     args.data_dir, args.ray_gpus_per_task)
+        except KeyboardInterrupt:
+            print("Interrupted: finished runs and training checkpoints are kept; run the same "
+                  "command again to continue.", file=sys.stderr)
+            return 130
     write_summary(results_dir)
     return 0
 

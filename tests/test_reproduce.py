@@ -336,6 +336,20 @@ def test_ctrl_c_stops_the_grid_at_once(tmp_path):
     assert len(list(markers.iterdir())) == 2, "runs started after Ctrl-C"
 
 
+def test_interrupted_grid_exits_130_with_how_to_continue(tmp_path, monkeypatch, capsys):
+    import benchmarks.reproduce as reproduce
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(reproduce, "run_grid", interrupted)
+    code = reproduce.main(["--preset", "quick", "--num-models", "1", "--no-oracle",
+                           "--results-dir", str(tmp_path / "res")])
+    assert code == 130
+    assert "run the same command again to continue" in capsys.readouterr().err
+    assert not (tmp_path / "res" / "summary.json").exists()
+
+
 def test_failed_run_is_reported_after_the_others_and_driver_writes_records(tmp_path):
     from benchmarks.reproduce import collect_outcomes
 
