@@ -172,6 +172,35 @@ def _remove_training_checkpoint(path: Path) -> None:
     path.with_suffix(".json").unlink(missing_ok=True)
 
 
+def training_progress(results_dir: str | Path, spec: RunSpec) -> str:
+    """One line on where a run stands: done, training or not started.
+
+    For a training in progress: its epoch, epoch cap and best validation loss so far. Reads
+    the run's record and its training checkpoint; changes nothing.
+    """
+    from pcc_agent.checkpoint import CheckpointError, load_checkpoint
+    from pcc_agent.presets import get_preset
+
+    label = f"{spec.env_id} {spec.method} noise={spec.noise_std} seed={spec.seed}"
+    record = load_finished_run(Path(results_dir) / spec.relative_path, spec)
+    if record is not None:
+        return f"{label}: done, {record['mean']:.1f}% of steps in goal"
+    path = training_checkpoint_path(results_dir, spec)
+    if not path.exists():
+        return f"{label}: not started"
+    try:
+        extra = load_checkpoint(path).extra
+    except CheckpointError as error:
+        return f"{label}: unreadable training checkpoint ({error}); it will train afresh"
+    history = extra.get("history") or [{}]
+    epoch_seconds = float(history[-1].get("time/epoch_seconds", float("nan")))
+    best = extra.get("best_validation_loss")
+    best_text = f"{best:.2f} at epoch {extra.get('best_epoch')}" if best is not None else "-"
+    cap = spec.max_epochs or get_preset(spec.env_id, spec.model_variant).train.epochs
+    return (f"{label}: training, epoch {extra.get('epochs', 0)} of at most {cap}, best "
+            f"validation loss {best_text} ({epoch_seconds:.1f} s/epoch)")
+
+
 def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any] | None:
     """Return a finished run's record, or None if the file is missing, partial or stale.
 
@@ -1070,6 +1099,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="Only rebuild the summary from existing run files.",
     )
+    parser.add_argument(
+        "--status",
+        action="store_true",
+        help="Only print where each run of the grid stands (done, training at epoch E with "
+        "its best validation loss, or not started), e.g. while the grid runs elsewhere.",
+    )
     return parser
 
 
@@ -1112,6 +1147,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["env_noise_levels"] = {}
         preset = preset.override(**changes)
         runs = expand_grid(preset, include_oracle=not args.no_oracle)
+        if args.status:
+            print("\n".join(training_progress(results_dir, run) for run in runs))
+            return 0
         pending = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
         cost = estimate_cost(pending, load_records(results_dir) if pending else ())
         workers = max(1, args.workers)

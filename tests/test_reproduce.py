@@ -92,9 +92,10 @@ def test_run_killed_mid_training_resumes_to_the_uninterrupted_result(tmp_path):
     import signal
     import time
 
-    from benchmarks.reproduce import training_checkpoint_path
+    from benchmarks.reproduce import training_checkpoint_path, training_progress
 
     spec = dataclasses.replace(tiny_spec(3), max_epochs=40, patience=40)
+    assert training_progress(tmp_path, spec).endswith("seed=3: not started")
     data_dir = tmp_path / "data"
     code = (
         "from benchmarks.reproduce import RunSpec, execute_run; "
@@ -111,8 +112,11 @@ def test_run_killed_mid_training_resumes_to_the_uninterrupted_result(tmp_path):
     child.wait()
     path = tmp_path / spec.relative_path
     assert load_finished_run(path, spec) is None
+    assert "seed=3: training, epoch " in training_progress(tmp_path, spec)
+    assert "of at most 40, best validation loss" in training_progress(tmp_path, spec)
     resumed = execute_run(spec, tmp_path, str(data_dir))
     assert not resumed.get("skipped") and load_finished_run(path, spec) is not None
+    assert "seed=3: done, " in training_progress(tmp_path, spec)
     assert 0 < resumed["training_resumed_at_epoch"] < 40
     assert not in_progress.exists()  # removed once the run is done
     straight = execute_run(spec, tmp_path / "straight", str(data_dir))
