@@ -12,8 +12,8 @@ for a state to be used.
 
 What a resumed run does not restore: the episode that was under way (the resumed run starts a
 new episode; the transitions already stored stay in the buffer) and the random streams, which
-are reseeded with ``seed + steps done`` (so a resumed run is deterministic, but not identical
-to an uninterrupted one).
+are reseeded from the run's seed and the steps done (so a resumed run is deterministic, but
+not identical to an uninterrupted one).
 """
 
 from __future__ import annotations
@@ -94,14 +94,22 @@ def load_state(path: Path, settings: dict[str, Any]) -> dict[str, Any] | None:
     if not path.exists():
         return None
     try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
+        # mmap: the replay buffer is read from the file as it is copied into SB3's buffer,
+        # not held twice in memory (an 80x80x2 image buffer takes gigabytes).
+        state = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
     except Exception as error:  # noqa: BLE001 - any unreadable file is discarded alike
         print(f"Discarding unreadable SAC state {path}: {error}")
         os.unlink(path)
         return None
-    if (not isinstance(state, dict) or state.get("format") != STATE_FORMAT
-            or state.get("settings") != settings):
-        print(f"Discarding SAC state {path}: made by a run with other settings.")
+    if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
+        print(f"Discarding SAC state {path}: not a state of format {STATE_FORMAT}.")
+        os.unlink(path)
+        return None
+    saved = state.get("settings") or {}
+    differing = sorted(k for k in {*saved, *settings} if saved.get(k) != settings.get(k))
+    if differing:
+        print(f"Discarding SAC state {path}: made with other {', '.join(differing)}; the run "
+              "starts afresh.")
         os.unlink(path)
         return None
     return state

@@ -182,6 +182,7 @@ def run_sac(
     wanted = sorted({c for c in checkpoints if c <= steps} | {steps})
     record = load_finished_sac_run(path, steps, wanted, task_seed_list, reward)
     if record is not None:
+        sac_state.state_path(path).unlink(missing_ok=True)  # left by a crash after the record
         return record
     policy = "CnnPolicy" if observation == "image" else "MlpPolicy"
     settings = {
@@ -211,13 +212,14 @@ def run_sac(
         steps_done = state["steps_done"]
         resumed_at = [*state["resumed_at"], steps_done]
         # Fresh random streams for the rest of the run, deterministic given the resume point.
-        model.set_random_seed(seed + steps_done)
+        model.set_random_seed(int(np.random.SeedSequence([seed, steps_done]).generate_state(1)[0]))
         print(f"Resuming SAC({observation}) seed {seed} on {env_id} at {steps_done} steps.")
     wanted = [c for c in wanted if c not in {point["env_steps"] for point in curve}]
 
     bar = tqdm(total=steps, initial=steps_done, unit="step",
                desc=f"SAC {observation} seed {seed}")
     start = time.perf_counter()
+    last_saved = steps_done
 
     class EvalAndSave(BaseCallback):
         # Called after each env step, before its transition is stored and trained on: the
@@ -248,10 +250,12 @@ def run_sac(
                     f"  {env_id} SAC({observation}) seed {seed} @ {self.num_timesteps} steps: "
                     f"{ev.mean:.1f}% in goal"
                 )
+            nonlocal last_saved
             processed = self.num_timesteps - 1
-            if wanted and (evaluated or (processed > steps_done and processed % save_every == 0)):
+            if wanted and (evaluated or processed - last_saved >= save_every):
                 sac_state.save_state(state_file, self.model, processed, settings, curve,
                                      earlier_seconds + time.perf_counter() - start, resumed_at)
+                last_saved = processed
             return True
 
     with bar:

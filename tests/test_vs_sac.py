@@ -136,18 +136,21 @@ def test_sac_run_cut_short_continues_from_its_state(tmp_path, monkeypatch):
         _tiny_state_run(tmp_path)
     assert not record_path.exists()
     saved = torch.load(state_file, weights_only=True)
-    # Saved after the evaluation at 40 steps and at 60 processed steps; not at the cut.
-    assert saved["steps_done"] == 60
+    # Saved after the evaluation at 40 steps (39 processed) and 30 steps later; not at the cut.
+    assert saved["steps_done"] == 69
     assert [p["env_steps"] for p in saved["curve"]] == [40]
 
     monkeypatch.setattr(pcc_agent.evaluation, "evaluate_control", real_evaluate)
     record = _tiny_state_run(tmp_path)
-    assert record["resumed_at_steps"] == [60]
+    assert record["resumed_at_steps"] == [69]
     # The evaluation at 40 steps is kept, not repeated; 80 and 120 are made by the resumed run.
     assert [p["env_steps"] for p in record["curve"]] == [40, 80, 120]
     assert record["curve"][0] == saved["curve"][0]
     assert record["train_seconds"] >= saved["train_seconds"]
     assert record_path.exists() and not state_file.exists()
+    # A state left by a crash between writing the record and removing the state goes too.
+    state_file.write_bytes(b"left over")
+    assert _tiny_state_run(tmp_path) == record and not state_file.exists()
 
 
 def test_sac_state_restores_weights_buffer_and_counters(tmp_path):
