@@ -207,6 +207,11 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
     "paper-fast-long-best3": _PAPER_FAST.replace(name="paper-fast-long-best3", max_epochs=1000,
                                                  patience=100, restarts=3,
                                                  candidates_preset="paper-fast-long"),
+    # The same with 2 trainings per model (seeds m and m + 1000): its trainings are the first
+    # two of every best3 model, so it costs nothing once those exist.
+    "paper-fast-long-best2": _PAPER_FAST.replace(name="paper-fast-long-best2", max_epochs=1000,
+                                                 patience=100, restarts=2,
+                                                 candidates_preset="paper-fast-long"),
     # Table 3: noisy dynamics, noise variance 1 for every domain and also 2 for Planar.
     "paper-noisy": ReproducePreset(
         name="paper-noisy",
