@@ -65,7 +65,9 @@ ORACLE_CONFIGS: dict[str, OracleConfig] = {
         # a wide central difference (in world units) gives usable slopes.
         fd_step=0.05,
     ),
-    "pcc/PendulumSwingUp-v0": OracleConfig(state_weights=(1.0, 0.1)),
+    # Velocity weight 0.01: with 0.1 the oracle swung up more slowly and scored 92.8% of steps
+    # in goal against 96.2% (the same as a trained PCC model) on the paper's 10 tasks.
+    "pcc/PendulumSwingUp-v0": OracleConfig(state_weights=(1.0, 0.01)),
     "pcc/PendulumBalance-v0": OracleConfig(state_weights=(1.0, 0.1)),
     "pcc/CartPole-v0": OracleConfig(state_weights=(1.0, 0.1, 0.1, 0.01)),
     "pcc/TwoLink-v0": OracleConfig(state_weights=(1.0, 1.0, 0.1, 0.1)),
