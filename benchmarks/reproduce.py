@@ -14,6 +14,7 @@ Examples:
     python -m benchmarks.reproduce --preset paper --envs pcc/Planar-v0 --workers 2
     python -m benchmarks.reproduce --preset paper --backend ray --ray-address auto \
         --ray-gpus-per-task 0.5
+    python -m benchmarks.reproduce --preset paper --envs pcc/Planar-v0 --status
     python -m benchmarks.reproduce --aggregate-only
 """
 
