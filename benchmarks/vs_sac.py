@@ -548,20 +548,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         checkpoints = args.checkpoints or sorted(
             {dataset_size, *np.geomspace(1000, args.steps, 4).astype(int).tolist()}
         )
-        for observation in args.observations:
-            for seed in args.seeds:
-                run_sac(
-                    args.env,
-                    observation,
-                    seed,
-                    args.steps,
-                    checkpoints,
-                    seeds,
-                    args.buffer_size,
-                    args.results_dir,
-                    args.reward,
-                    args.save_every,
-                )
+        try:
+            for observation in args.observations:
+                for seed in args.seeds:
+                    run_sac(args.env, observation, seed, args.steps, checkpoints, seeds,
+                            args.buffer_size, args.results_dir, args.reward, args.save_every)
+        except KeyboardInterrupt:
+            print("Interrupted: finished runs and the last training state are kept; run the "
+                  "same command again to continue.", file=sys.stderr)
+            return 130
     summary = summarize(args.env, args.results_dir, args.reproduce_dir, seeds)
     write_outputs(summary, args.results_dir)
     return 0

@@ -196,3 +196,15 @@ def test_sac_state_of_other_settings_or_unreadable_is_discarded(tmp_path):
     with pytest.raises(ValueError, match="save_every"):
         vs_sac.run_sac("pcc/Planar-v0", "state", 0, 10, [], [7], 50, tmp_path, "sparse",
                        save_every=0)
+
+
+def test_interrupted_comparison_exits_130_with_how_to_continue(tmp_path, monkeypatch, capsys):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(vs_sac, "run_sac", interrupted)
+    code = vs_sac.main(["--env", "pcc/Planar-v0", "--steps", "100", "--seeds", "0",
+                        "--results-dir", str(tmp_path / "out")])
+    assert code == 130
+    assert "run the same command again to continue" in capsys.readouterr().err
+    assert not (tmp_path / "out" / "Planar-v0.json").exists()
