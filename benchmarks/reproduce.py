@@ -853,9 +853,12 @@ def select_restarts(
             overrides = filed[len(preset.runs_preset):]
             if not overrides and not _is_training_of(s, preset):
                 continue
+            training = s["seed"] // RESTART_SEED_STRIDE
+            if training >= preset.restarts:  # a training of a preset with more restarts
+                continue
             cell = (preset.name + overrides, s["env_id"], s["method"], s["noise_std"],
                     s["seed"] % RESTART_SEED_STRIDE)
-            by_cell.setdefault(cell, {})[s["seed"] // RESTART_SEED_STRIDE] = rec
+            by_cell.setdefault(cell, {})[training] = rec
         for (label, _, _, _, model_seed), trainings in sorted(by_cell.items()):
             if model_seed >= preset.num_models or sorted(trainings) != list(
                     range(preset.restarts)):

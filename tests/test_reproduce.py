@@ -483,3 +483,9 @@ def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
     assert overridden["mean"] == 20.0
     assert best3.override(max_epochs=5).name == "paper-fast-long-best3+max_epochs=5"
     assert best3.override(max_epochs=5).runs_preset == "paper-fast-long+max_epochs=5"
+    # A preset with fewer restarts uses the first trainings and ignores the third.
+    best2 = best3.replace(name="best2", restarts=2)
+    picked = {m["spec"]["seed"]: m for m in select_restarts(records, [best2])}
+    assert sorted(picked) == [0, 1]
+    assert picked[0]["mean"] == 75.0 and len(picked[0]["restarts"]) == 2
+    assert picked[1]["selected_training_seed"] == 1 and picked[1]["mean"] == 70.0
