@@ -6,7 +6,9 @@ For every finished model run of a reproduction results directory whose saved age
 are the same for every model: the env's uniform sampler with a seed no model was trained
 on. It writes the results beside the run's control score and best validation loss, with
 Spearman rank correlations between each diagnostic and the control score, per method and
-over all methods. Nothing is retrained and no control task is rerun.
+over all methods. It also reports how well each model's code determines every true-state
+coordinate (:func:`pcc_agent.diagnostics.state_decodability`, k-NN R^2), which shows e.g. a
+cart-pole code without velocities. Nothing is retrained and no control task is rerun.
 
 Usage:
     python -m benchmarks.latent_diagnostics --results-dir benchmarks/results/reproduce \
@@ -36,7 +38,10 @@ from benchmarks.reproduce import (
 
 #: Seed of the held-out transitions (the grids train on seeds 0, 1, ...).
 HELD_OUT_SEED = 1_000_000
-DIAGNOSTICS = ("consistency_error", "curvature", "latent_scale", "best_validation_loss")
+#: Fewest held-out transitions: the k-NN state R^2 uses 2/3 as references (k = 10) and 1/3.
+MIN_SAMPLES = 30
+DIAGNOSTICS = ("consistency_error", "curvature", "latent_scale", "best_validation_loss",
+               "min_state_r2")
 
 
 def spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
@@ -64,15 +69,21 @@ def diagnose_runs(
     results_dir: Path, env_id: str, preset: str, num_samples: int = 1000
 ) -> list[dict[str, Any]]:
     """One row per finished model run of (env, preset) with a saved agent."""
+    import gymnasium as gym
     import torch
 
     from pcc_agent.agent import PCCAgent
-    from pcc_agent.diagnostics import latent_diagnostics
+    from pcc_agent.diagnostics import latent_diagnostics, state_decodability
     from pcc_envs.data import collect_transitions
 
     torch.set_num_threads(1)
     held_out: dict[float, Any] = {}
     rows = []
+    env = gym.make(env_id)
+    try:
+        state_error = env.unwrapped.state_error
+    finally:
+        env.close()
     for record in load_records(results_dir):
         spec = RunSpec(**record["spec"])
         if (spec.method == ORACLE or spec.env_id != env_id or spec.preset != preset
@@ -88,15 +99,18 @@ def diagnose_runs(
         data = held_out[spec.noise_std]
         agent = PCCAgent.load(agent_file, device="cpu")
         found = latent_diagnostics(agent.model, data.obs, data.action, data.next_obs)
+        state_r2 = state_decodability(agent.model, data.obs, data.state, state_error)
         rows.append({
             "env": env_id, "preset": preset, "method": spec.method, "seed": spec.seed,
             "noise_std": spec.noise_std, "percent_in_goal": float(record["mean"]),
             "best_validation_loss": record.get("training", {}).get("best_validation_loss"),
             **found.to_dict(),
+            "state_r2": [round(float(v), 4) for v in state_r2],
+            "min_state_r2": float(state_r2.min()),
         })
         print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
-              f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}",
-              flush=True)
+              f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
+              f"R^2 {np.round(state_r2, 2).tolist()}", flush=True)
     return sorted(rows, key=lambda r: (r["method"], r["noise_std"], r["seed"]))
 
 
@@ -119,15 +133,15 @@ def markdown(rows: list[dict[str, Any]], corr: dict[str, dict[str, float | None]
     """The rows and the correlations as Markdown tables."""
     lines = [
         "| method | seed | % in goal | consistency error | curvature | latent scale "
-        "| best val. loss |",
-        "|---|---|---|---|---|---|---|",
+        "| best val. loss | state R^2 (k-NN, per coordinate) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         val = "-" if r["best_validation_loss"] is None else f"{r['best_validation_loss']:.1f}"
         lines.append(
             f"| {r['method']} | {r['seed']} | {r['percent_in_goal']:.1f} "
             f"| {r['consistency_error']:.4f} | {r['curvature']:.2e} | {r['latent_scale']:.2f} "
-            f"| {val} |"
+            f"| {val} | {', '.join(f'{v:.2f}' for v in r['state_r2'])} |"
         )
     lines += ["", "Spearman rank correlation with the % in goal:", "",
               "| models | n | " + " | ".join(DIAGNOSTICS) + " |",
@@ -157,8 +171,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m benchmarks.latent_diagnostics``."""
     arguments = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(arguments)
-    if args.samples < 2:
-        raise SystemExit(f"--samples must be at least 2, got {args.samples}.")
+    if args.samples < MIN_SAMPLES:
+        raise SystemExit(f"--samples must be at least {MIN_SAMPLES} (the state R^2 needs "
+                         f"reference and held-out codes), got {args.samples}.")
     rows = diagnose_runs(args.results_dir, args.env, args.preset, args.samples)
     if not rows:
         raise SystemExit(f"No finished {args.env} runs of preset {args.preset!r} with a saved "

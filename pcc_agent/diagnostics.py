@@ -15,12 +15,19 @@ transitions:
   Jacobians, for every method.
 * ``latent_scale``: the mean per-dimension standard deviation of ``mu(x_t)``.
 
+It also needs the latent code to carry the state. :func:`state_decodability` measures, for
+each true-state coordinate, how well the encoder mean determines it (a nearest-neighbour
+regression, so any smooth one-to-one code counts, not only a linear one). Image pairs carry
+velocities only through small frame-to-frame shifts; a code without them cannot balance a
+cart-pole however good its dynamics are.
+
 On Planar (``benchmarks/latent_diagnostics.py``, docs/training.md) the consistency error
 tells the models that control well from those that do not.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -30,7 +37,7 @@ import torch
 from pcc_agent.losses import curvature_penalty
 from pcc_agent.model import EmbeddingModel
 
-__all__ = ["LatentDiagnostics", "latent_diagnostics"]
+__all__ = ["LatentDiagnostics", "knn_decodability", "latent_diagnostics", "state_decodability"]
 
 
 @dataclass(frozen=True)
@@ -113,3 +120,112 @@ def latent_diagnostics(
         curvature=float(torch.cat(curvatures).mean()),
         num_samples=len(obs),
     )
+
+
+#: Signature of an env's ``state_error(state, reference)``: ``state - reference`` (batched),
+#: with angular coordinates wrapped.
+StateError = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def _subtract(state: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    return np.asarray(state, dtype=np.float64) - reference
+
+
+def knn_decodability(
+    latent: np.ndarray,
+    states: np.ndarray,
+    state_error: StateError | None = None,
+    neighbours: int = 10,
+    fit_fraction: float = 2.0 / 3.0,
+    chunk_size: int = 256,
+) -> np.ndarray:
+    """Per state coordinate, the R^2 of a k-nearest-neighbour regression from the latent code.
+
+    The first ``fit_fraction`` of the rows are the reference set, the rest are predicted: each
+    state is estimated as the mean of the states of its ``neighbours`` nearest reference codes,
+    in the whitened latent space (so a coordinate carried by a low-variance latent direction
+    still counts). ``R^2 = 1 - mean squared error / variance`` per coordinate: about 1 when the
+    code determines the coordinate, about 0 (or below) when it carries nothing of it.
+
+    Args:
+        latent: Codes ``(N, n_z)``, e.g. encoder means.
+        states: True states ``(N, d)`` of the same rows.
+        state_error: ``state_error(a, b)`` = ``a - b`` with angles wrapped (an env's
+            ``state_error``); default plain subtraction.
+        neighbours: k of the k-NN regression.
+        fit_fraction: Fraction of the rows used as the reference set.
+        chunk_size: Predicted rows per distance computation (bounds memory).
+
+    Returns:
+        ``(d,)`` float64 array of R^2 values.
+    """
+    latent = np.asarray(latent, dtype=np.float64)
+    states = np.asarray(states, dtype=np.float64)
+    if latent.ndim != 2 or states.ndim != 2 or len(latent) != len(states):
+        raise ValueError(
+            f"Need latent codes (N, n_z) and states (N, d) with the same N, got shapes "
+            f"{latent.shape} and {states.shape}."
+        )
+    num_fit = int(len(latent) * fit_fraction)
+    if num_fit < neighbours or len(latent) - num_fit < 2 or neighbours < 1:
+        raise ValueError(
+            f"{len(latent)} rows with fit_fraction {fit_fraction} leave {num_fit} reference and "
+            f"{len(latent) - num_fit} predicted rows; need at least neighbours={neighbours} "
+            "reference rows and 2 predicted ones."
+        )
+    error = state_error or _subtract
+    centred = latent - latent[:num_fit].mean(axis=0)
+    eigval, eigvec = np.linalg.eigh(np.atleast_2d(np.cov(centred[:num_fit].T)))
+    keep = eigval > max(eigval.max(), 1e-300) * 1e-10
+    white = centred @ eigvec[:, keep] / np.sqrt(eigval[keep])
+    reference, query = white[:num_fit], white[num_fit:]
+    ref_states, query_states = states[:num_fit], states[num_fit:]
+    residuals = []
+    for start in range(0, len(query), chunk_size):
+        part = query[start:start + chunk_size]
+        dist = ((part[:, None, :] - reference[None, :, :]) ** 2).sum(-1)
+        nearest = np.argpartition(dist, neighbours - 1, axis=1)[:, :neighbours]
+        target = query_states[start:start + chunk_size]
+        offsets = error(ref_states[nearest].reshape(-1, states.shape[1]),
+                        np.repeat(target, neighbours, axis=0))
+        residuals.append(offsets.reshape(len(part), neighbours, -1).mean(axis=1))
+    mse = (np.concatenate(residuals) ** 2).mean(axis=0)
+    spread = error(query_states, np.broadcast_to(query_states.mean(axis=0), query_states.shape))
+    variance = spread.var(axis=0)
+    return 1.0 - mse / np.maximum(variance, 1e-300)
+
+
+def state_decodability(
+    model: EmbeddingModel,
+    obs: np.ndarray,
+    states: np.ndarray,
+    state_error: StateError | None = None,
+    neighbours: int = 10,
+    batch_size: int = 500,
+) -> np.ndarray:
+    """:func:`knn_decodability` of the true states from the encoder means of ``obs``.
+
+    Args:
+        model: A trained embedding model.
+        obs: Observations ``uint8 (N, *obs_shape)``, best held out from the training data.
+        states: The true states ``(N, d)`` behind them (``TransitionDataset.state``).
+        state_error: The env's ``state_error`` (wraps angles); default plain subtraction.
+        neighbours: k of the k-NN regression.
+        batch_size: Observations per forward pass.
+
+    Returns:
+        ``(d,)`` R^2 per state coordinate (1: determined by the code; 0: absent from it).
+    """
+    if tuple(obs.shape[1:]) != model.obs_shape:
+        raise ValueError(f"Observations have shape {obs.shape[1:]}, the model expects "
+                         f"{model.obs_shape}.")
+    device = next(model.parameters()).device
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            codes = [model.encode(torch.as_tensor(obs[i:i + batch_size], device=device))[0].cpu()
+                     for i in range(0, len(obs), batch_size)]
+    finally:
+        model.train(was_training)
+    return knn_decodability(torch.cat(codes).numpy(), states, state_error, neighbours)

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import json
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 from benchmarks import latent_diagnostics as cli
-from pcc_agent.diagnostics import latent_diagnostics
+from pcc_agent.diagnostics import knn_decodability, latent_diagnostics, state_decodability
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import get_preset
 from pcc_envs.data import collect_transitions
@@ -46,6 +47,40 @@ def test_diagnostics_are_reproducible_and_check_their_input():
         latent_diagnostics(model, data.obs, data.action[:, :1], data.next_obs)
 
 
+def test_knn_decodability_finds_what_the_code_carries():
+    """A code of (s0, 1e-3 s1) carries both coordinates (whitening), a code of s0 only one."""
+    rng = np.random.default_rng(0)
+    states = rng.uniform(-1.0, 1.0, size=(1500, 2))
+    only_first = knn_decodability(states[:, :1], states)
+    assert only_first[0] > 0.98 and abs(only_first[1]) < 0.2
+    both = knn_decodability(np.c_[states[:, 0], 1e-3 * states[:, 1]], states)
+    assert both.min() > 0.95
+
+
+def test_knn_decodability_wraps_angles_with_the_env_state_error():
+    env = gym.make("pcc/PendulumSwingUp-v0").unwrapped
+    rng = np.random.default_rng(1)
+    states = np.c_[rng.uniform(-np.pi, np.pi, 1500), rng.uniform(-1.0, 1.0, 1500)]
+    code = np.c_[np.cos(states[:, 0]), np.sin(states[:, 0])]
+    wrapped = knn_decodability(code, states, env.state_error)
+    unwrapped = knn_decodability(code, states)
+    assert wrapped[0] > 0.99 and unwrapped[0] < wrapped[0] - 0.01
+    with pytest.raises(ValueError, match="same N"):
+        knn_decodability(code[:10], states)
+    with pytest.raises(ValueError, match="reference"):
+        knn_decodability(code[:12], states[:12])
+
+
+def test_state_decodability_of_a_model_checks_its_input():
+    model = planar_model()
+    data = collect_transitions("pcc/Planar-v0", 60, seed=2)
+    first = state_decodability(model, data.obs, data.state, batch_size=16)
+    assert first.shape == (2,) and np.isfinite(first).all()
+    assert np.array_equal(first, state_decodability(model, data.obs, data.state))
+    with pytest.raises(ValueError, match="model expects"):
+        state_decodability(model, data.obs[:, :, :20], data.state)
+
+
 def test_spearman_matches_known_values():
     assert cli.spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
     assert cli.spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
@@ -70,6 +105,12 @@ def test_cli_on_a_tiny_grid(tmp_path):
     assert result["spearman"]["pcc"]["n_models"] == 3
     assert "--preset tiny" in result["command"]
     assert "| pcc | 2 |" in out.with_name(out.name + ".md").read_text()
+    for row in result["rows"]:
+        assert len(row["state_r2"]) == 2
+        assert row["min_state_r2"] == pytest.approx(min(row["state_r2"]), abs=1e-4)
+    with pytest.raises(SystemExit, match="at least 30"):
+        cli.main(["--results-dir", str(tmp_path), "--preset", "tiny", "--samples", "20",
+                  "--output", str(out)])
     with pytest.raises(SystemExit, match="No finished"):
         cli.main(["--results-dir", str(tmp_path), "--preset", "other", "--output", str(out)])
 
