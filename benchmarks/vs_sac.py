@@ -395,7 +395,10 @@ def summarize(
             },
         )
         entry["percentages"].extend(rec["percentages"])
-        entry["num_samples"] = rec.get("config", {}).get("data", {}).get("num_samples")
+        data_size = rec.get("config", {}).get("data", {}).get("num_samples")
+        # A model of a restarts preset consumed one data set per training it was chosen from.
+        trainings = len(rec.get("restarts") or [None])
+        entry["num_samples"] = None if data_size is None else int(data_size) * trainings
     if task_seed_list is not None and not any(
         entry["method"] == ORACLE for entry in model_based.values()
     ):

@@ -98,6 +98,32 @@ def test_model_based_points_are_per_preset(tmp_path):
     assert points["pcc (paper-fast)"]["mean"] == 80.0
 
 
+def test_restarts_model_counts_the_data_of_every_training(tmp_path):
+    """A best-of-2 model consumed two data sets: its point sits at 2 x 5000 samples."""
+    from dataclasses import asdict
+
+    from benchmarks.reproduce import RunSpec, _preset_for, _write_json_atomic
+    from pcc_agent.planning import PLANNER_REVISION
+
+    for seed, loss, score in ((0, 140.0, 20.0), (1000, 130.0, 70.0)):
+        spec = {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0, "seed": seed,
+                "preset": "paper-fast-long", "model_variant": "fast", "num_tasks": 10,
+                "task_seed": 2020, "max_epochs": 1000, "patience": 100}
+        planner = json.loads(json.dumps(asdict(_preset_for(RunSpec(**spec)).planner)))
+        _write_json_atomic(
+            tmp_path / "runs" / f"seed{seed}.json",
+            {"format": 1, "status": "done", "percentages": [score], "mean": score,
+             "train_seconds": 1.0, "training": {"best_validation_loss": loss}, "spec": spec,
+             "config": {"data": {"num_samples": 5000}, "planner": planner,
+                        "planner_revision": PLANNER_REVISION}},
+        )
+    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)["model_based"]
+    assert points["pcc (paper-fast-long)"]["num_samples"] == 5000
+    assert points["pcc (paper-fast-long-best2)"]["num_samples"] == 10000
+    assert points["pcc (paper-fast-long-best2)"]["mean"] == 70.0
+    assert "pcc (paper-fast-long-best3)" not in points
+
+
 def test_model_based_points_on_other_tasks_are_left_out(tmp_path):
     from benchmarks.reproduce import _write_json_atomic
 
