@@ -397,7 +397,7 @@ def summarize(
         entry["percentages"].extend(rec["percentages"])
         data_size = rec.get("config", {}).get("data", {}).get("num_samples")
         # A model of a restarts preset consumed one data set per training it was chosen from.
-        trainings = len(rec.get("restarts") or [None])
+        trainings = len(rec.get("restarts", ())) or 1
         entry["num_samples"] = None if data_size is None else int(data_size) * trainings
     if task_seed_list is not None and not any(
         entry["method"] == ORACLE for entry in model_based.values()
