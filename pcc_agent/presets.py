@@ -383,12 +383,14 @@ _LANE_MODEL = _paper_cnn_model(8, 32, 200, (200,), 300)
 
 # Planner numbers are defaults only: benchmarks/ tunes kappa and plan_length per env. The
 # paper's cost has R = I and Q = kappa I; kappa = 10 with R = I gives the plans of Q = I,
-# R = 0.1 I up to rounding (iLQR is invariant to scaling the cost), the first runs' weights.
+# R = 0.1 I up to rounding (iLQR is invariant to scaling the cost in exact arithmetic; its
+# absolute regularization and tolerances are not), the first runs' weights.
 _PLANNERS = {
     # Planar: the paper's T = 40 (the whole episode). Measured on a trained PCC model (seed 1,
-    # 10 tasks, benchmarks/results/planner_sweep_planar_pcc_seed1.json): 36.5% in goal with a
-    # 40-step window against 20.5% with 10 steps (an E2C model preferred 10: 43.5% vs 21.2%,
-    # benchmarks/results/planner_sweep_planar_e2c_seed1.json; the paper's value is kept).
+    # 10 tasks, benchmarks/results/solid_obstacles/planner_sweep_planar_pcc_seed1.json):
+    # 36.5% in goal with a 40-step window against 20.5% with 10 steps (an E2C model preferred
+    # 10: 43.5% vs 21.2%, solid_obstacles/planner_sweep_planar_e2c_seed1.json; the paper's
+    # value is kept). Both were measured on the old solid-obstacle geometry.
     "pcc/Planar-v0": PlannerConfig(plan_length=40, kappa=10.0, iterations=4),
     # Pendulum swing-up: 5 iLQR iterations per MPC step instead of 2. Measured on the first 6
     # trained models (seeds 0-1 of PCC, E2C, RCE; benchmarks/results/planner_sweep/
