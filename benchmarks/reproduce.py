@@ -24,13 +24,15 @@ import argparse
 import contextlib
 import json
 import math
+import multiprocessing
 import os
 import platform
 import signal
 import sys
+import threading
 import time
 from collections.abc import Iterable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import InvalidStateError, ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -446,15 +448,35 @@ def _worker_init() -> None:
     torch.set_num_threads(1)
 
 
-def _pool_worker_init() -> None:
+def _pool_worker_init(parent_ignores_sigint: bool = False) -> None:
     """A pool worker ends at Ctrl-C (the terminal signals the whole process group).
 
     Python's default would raise KeyboardInterrupt inside the run, which the pool reports as
     that run's result before the worker takes the next queued run. The run's training
-    checkpoint is kept, so re-running the grid continues it.
+    checkpoint is kept, so re-running the grid continues it. A grid started in the background
+    by a non-interactive shell ignores SIGINT; its workers then ignore it too, so a stray
+    SIGINT cannot kill them under a main process that keeps going.
     """
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN if parent_ignores_sigint else signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the main process's graceful handler
     _worker_init()
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    """Signal handler: stop the grid the way Ctrl-C does (raise KeyboardInterrupt)."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _ignore_cancelled_future_race(args: threading.ExceptHookArgs) -> None:
+    """Thread excepthook: drop the executor manager's error on futures we cancelled.
+
+    At Ctrl-C the workers die with the whole process group while the main process cancels the
+    queued futures; Python 3.11's pool manager then tries to mark those cancelled futures as
+    failed and prints an ``InvalidStateError`` traceback after the clean exit message (Python
+    3.12 ignores that case itself). Every other thread error goes to the default hook.
+    """
+    if not isinstance(args.exc_value, InvalidStateError):
+        threading.__excepthook__(args)
 
 
 #: What a backend reports per run, in completion order: the record, or the run's error.
@@ -539,7 +561,10 @@ def pool_outcomes(
     If the consumer stops early (Ctrl-C, an error, ``close()``), the queued runs are
     cancelled instead of being trained silently before the program exits.
     """
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_pool_worker_init)
+    parent_ignores_sigint = signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    pool = ProcessPoolExecutor(
+        max_workers=workers, initializer=_pool_worker_init, initargs=(parent_ignores_sigint,)
+    )
     futures: dict[Any, RunSpec] = {}
     try:
         futures = {pool.submit(run, spec, *args): spec for spec in todo}
@@ -552,9 +577,14 @@ def pool_outcomes(
     except BaseException:
         # Cancel each queued future here: the pool's own cancel_futures can miss them when
         # the executor object is collected before its manager thread acts on the flag.
+        threading.excepthook = _ignore_cancelled_future_race
         for future in futures:
             future.cancel()
         pool.shutdown(wait=False, cancel_futures=True)
+        # Runs in progress stop too (their last epoch checkpoint is kept), also when the signal
+        # reached only this process (SIGTERM, or SIGINT sent to one pid).
+        for worker in multiprocessing.active_children():
+            worker.terminate()
         print("Stopped: queued runs cancelled.", file=sys.stderr, flush=True)
         raise
     pool.shutdown()
@@ -1167,6 +1197,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if preset.name != args.preset:
             print(f"The overrides change what the runs compute: their files and rows are "
                   f"labelled {preset.name!r}.")
+        # SIGTERM (kill, a batch scheduler's stop) ends the grid like Ctrl-C does.
+        signal.signal(signal.SIGTERM, _interrupt)
         try:
             run_grid(runs, results_dir, args.workers, args.backend, args.ray_address,
                      args.data_dir, args.ray_gpus_per_task)

@@ -312,32 +312,55 @@ def test_stopping_the_pool_cancels_queued_runs(tmp_path):
     assert started <= 8, f"{started} of 16 runs started although the grid was stopped"
 
 
-def test_ctrl_c_stops_the_grid_at_once(tmp_path):
-    """SIGINT to the process group (a terminal's Ctrl-C): workers end, nothing new starts."""
+def _start_sleepy_grid(markers: Path) -> subprocess.Popen:
+    """A driver process running 8 five-second stand-in runs on 2 workers, in its own process
+    group and with SIGINT at its default (as under a terminal, even if pytest ignores it);
+    returns once both workers are in their first run."""
+    import signal
+    import time
+
+    code = (
+        "import sys; sys.path.insert(0, 'tests'); from test_reproduce import _sleepy_run, "
+        "tiny_spec; from benchmarks.reproduce import _interrupt, collect_outcomes, "
+        "pool_outcomes; import signal; signal.signal(signal.SIGTERM, _interrupt); "
+        "specs = [tiny_spec(s) for s in range(8)]; "
+        f"collect_outcomes(pool_outcomes(_sleepy_run, specs, 2, {str(markers)!r}, 5.0), 8)"
+    )
+    child = subprocess.Popen(
+        [sys.executable, "-c", code], cwd=ROOT, start_new_session=True,
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    deadline = time.monotonic() + 120
+    while len(list(markers.iterdir())) < 2:  # both workers are in their first run
+        assert child.poll() is None and time.monotonic() < deadline, child.stderr.read()
+        time.sleep(0.02)
+    return child
+
+
+@pytest.mark.parametrize("how", ["SIGINT to the process group", "SIGTERM to the driver"])
+def test_stop_signal_stops_the_grid_at_once(tmp_path, how):
+    """A terminal's Ctrl-C signals the whole group; ``kill`` or a batch scheduler signals only
+    the driver. Either way the runs in progress end, nothing new starts, and the driver exits."""
     import signal
     import time
 
     markers = tmp_path / "markers"
     markers.mkdir()
-    code = (
-        "import sys; sys.path.insert(0, 'tests'); from test_reproduce import _sleepy_run, "
-        "tiny_spec; from benchmarks.reproduce import collect_outcomes, pool_outcomes; "
-        "specs = [tiny_spec(s) for s in range(8)]; "
-        f"collect_outcomes(pool_outcomes(_sleepy_run, specs, 2, {str(markers)!r}, 5.0), 8)"
-    )
-    child = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True,
-                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while len(list(markers.iterdir())) < 2:  # both workers are in their first run
-        assert child.poll() is None and time.monotonic() < deadline, child.stderr.read()
-        time.sleep(0.02)
+    child = _start_sleepy_grid(markers)
     start = time.monotonic()
-    os.killpg(child.pid, signal.SIGINT)
+    if how.startswith("SIGINT"):
+        os.killpg(child.pid, signal.SIGINT)
+    else:
+        os.kill(child.pid, signal.SIGTERM)
     child.wait(timeout=30)
+    stderr = child.stderr.read()
     assert time.monotonic() - start < 4.0, "the driver waited for the runs in progress"
     assert child.returncode != 0
+    assert "Stopped: queued runs cancelled." in stderr
+    assert "InvalidStateError" not in stderr
     time.sleep(1.0)
-    assert len(list(markers.iterdir())) == 2, "runs started after Ctrl-C"
+    assert len(list(markers.iterdir())) == 2, "runs started after the stop signal"
 
 
 def test_interrupted_grid_exits_130_with_how_to_continue(tmp_path, monkeypatch, capsys):
