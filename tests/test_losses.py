@@ -23,20 +23,14 @@ from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ModelConfig, TrainConfig
 
 # Forward-mode AD loads torch's jit decompositions once; torch itself warns about them.
-pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated")
+pytestmark = [
+    pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated"),
+    pytest.mark.usefixtures("single_torch_thread"),
+]
 
 SMALL = ModelConfig(latent_dim=3, encoder_hidden=(32,), decoder_hidden=(32,),
                     transition_hidden=(16, 16), backward_nz=4, backward_nu=4, backward_nx=16,
                     backward_joint=16)
-
-
-@pytest.fixture(autouse=True)
-def _single_thread():
-    """Small models: one intra-op thread is as fast and immune to a busy shared machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def _normal(mean, logvar):

@@ -15,7 +15,10 @@ from pcc_agent.presets import ModelConfig, TrainConfig
 from pcc_agent.training import dataset_arrays, resolve_device, train_embedding
 
 # Forward-mode AD loads torch's jit decompositions once; torch itself warns about them.
-pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated")
+pytestmark = [
+    pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated"),
+    pytest.mark.usefixtures("single_torch_thread"),
+]
 
 SIZE = 20
 CONFIG = ModelConfig(latent_dim=2, encoder_hidden=(64,), decoder_hidden=(64,),
@@ -23,15 +26,6 @@ CONFIG = ModelConfig(latent_dim=2, encoder_hidden=(64,), decoder_hidden=(64,),
                      backward_joint=32)
 TRAIN = TrainConfig(epochs=3, batch_size=32, validation_fraction=0.2, patience=0, seed=0,
                     lr=2e-3)
-
-
-@pytest.fixture(autouse=True)
-def _single_thread():
-    """Small models: one intra-op thread is as fast and immune to a busy shared machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def planar_like(n: int, seed: int = 0):
