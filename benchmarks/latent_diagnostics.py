@@ -8,7 +8,10 @@ on. It writes the results beside the run's control score and best validation los
 Spearman rank correlations between each diagnostic and the control score, per method and
 over all methods. It also reports how well each model's code determines every true-state
 coordinate (:func:`pcc_agent.diagnostics.state_decodability`, k-NN R^2), which shows e.g. a
-cart-pole code without velocities. Nothing is retrained and no control task is rerun.
+cart-pole code without velocities, and how each model's dynamics behave at the goal
+(:func:`pcc_agent.diagnostics.goal_linearization`: the goal code's one-step drift and the
+spectral radius there, beside the true dynamics' at the goal state). Nothing is retrained and
+no control task is rerun.
 
 Usage:
     python -m benchmarks.latent_diagnostics --results-dir benchmarks/results/reproduce \
@@ -41,7 +44,7 @@ HELD_OUT_SEED = 1_000_000
 #: Fewest held-out transitions: the k-NN state R^2 uses 2/3 as references (k = 10) and 1/3.
 MIN_SAMPLES = 30
 DIAGNOSTICS = ("consistency_error", "curvature", "latent_scale", "best_validation_loss",
-               "min_state_r2")
+               "min_state_r2", "goal_drift", "goal_spectral_radius")
 
 
 def spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
@@ -73,7 +76,7 @@ def diagnose_runs(
     import torch
 
     from pcc_agent.agent import PCCAgent
-    from pcc_agent.diagnostics import latent_diagnostics, state_decodability
+    from pcc_agent.diagnostics import goal_linearization, latent_diagnostics, state_decodability
     from pcc_envs.data import collect_transitions
 
     torch.set_num_threads(1)
@@ -100,6 +103,7 @@ def diagnose_runs(
         agent = PCCAgent.load(agent_file, device="cpu")
         found = latent_diagnostics(agent.model, data.obs, data.action, data.next_obs)
         state_r2 = state_decodability(agent.model, data.obs, data.state, state_error)
+        at_goal = goal_linearization(agent.model, agent.goal_observation, found.latent_scale)
         rows.append({
             "env": env_id, "preset": preset, "method": spec.method, "seed": spec.seed,
             "noise_std": spec.noise_std, "percent_in_goal": float(record["mean"]),
@@ -107,11 +111,29 @@ def diagnose_runs(
             **found.to_dict(),
             "state_r2": [round(float(v), 4) for v in state_r2],
             "min_state_r2": float(state_r2.min()),
+            "goal_drift": at_goal.drift,
+            "goal_spectral_radius": at_goal.spectral_radius,
         })
         print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
               f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
-              f"R^2 {np.round(state_r2, 2).tolist()}", flush=True)
+              f"R^2 {np.round(state_r2, 2).tolist()}, at the goal: drift {at_goal.drift:.3f}, "
+              f"spectral radius {at_goal.spectral_radius:.3f}", flush=True)
     return sorted(rows, key=lambda r: (r["method"], r["noise_std"], r["seed"]))
+
+
+def true_goal_linearization_of(env_id: str) -> dict[str, Any] | None:
+    """The env's true dynamics linearized at its goal, or None without cheap true dynamics."""
+    import gymnasium as gym
+
+    from pcc_agent.diagnostics import true_goal_linearization
+
+    env = gym.make(env_id)
+    try:
+        if not getattr(env.unwrapped, "supports_oracle", False):
+            return None
+        return true_goal_linearization(env).to_dict()
+    finally:
+        env.close()
 
 
 def correlations(rows: list[dict[str, Any]]) -> dict[str, dict[str, float | None]]:
@@ -124,25 +146,42 @@ def correlations(rows: list[dict[str, Any]]) -> dict[str, dict[str, float | None
         score = [r["percent_in_goal"] for r in members]
         out[name] = {"n_models": len(members)}
         for key in DIAGNOSTICS:
-            pairs = [(r[key], s) for r, s in zip(members, score) if r[key] is not None]
+            pairs = [(r[key], s) for r, s in zip(members, score) if r.get(key) is not None]
             out[name][key] = spearman(*zip(*pairs)) if pairs else None
     return out
 
 
-def markdown(rows: list[dict[str, Any]], corr: dict[str, dict[str, float | None]]) -> str:
-    """The rows and the correlations as Markdown tables."""
+def markdown(
+    rows: list[dict[str, Any]],
+    corr: dict[str, dict[str, float | None]],
+    true_goal: dict[str, Any] | None = None,
+) -> str:
+    """The rows and the correlations as Markdown tables.
+
+    ``true_goal`` (the true dynamics' :class:`~pcc_agent.diagnostics.GoalLinearization` as a
+    dict) is stated under the table.
+    """
     lines = [
         "| method | seed | % in goal | consistency error | curvature | latent scale "
-        "| best val. loss | state R^2 (k-NN, per coordinate) |",
-        "|---|---|---|---|---|---|---|---|",
+        "| best val. loss | state R^2 (k-NN, per coordinate) | goal drift "
+        "| goal spectral radius |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         val = "-" if r["best_validation_loss"] is None else f"{r['best_validation_loss']:.1f}"
         lines.append(
             f"| {r['method']} | {r['seed']} | {r['percent_in_goal']:.1f} "
             f"| {r['consistency_error']:.4f} | {r['curvature']:.2e} | {r['latent_scale']:.2f} "
-            f"| {val} | {', '.join(f'{v:.2f}' for v in r['state_r2'])} |"
+            f"| {val} | {', '.join(f'{v:.2f}' for v in r['state_r2'])} "
+            f"| {r['goal_drift']:.3f} | {r['goal_spectral_radius']:.3f} |"
         )
+    lines += ["", "Goal drift: one step with no action from the goal's code, in units of the "
+              "latent scale. Goal spectral radius: the largest eigenvalue modulus of the "
+              "latent dynamics linearized there (above 1: unstable)."]
+    if true_goal is not None:
+        lines[-1] += (f" The true dynamics at the goal state: spectral radius "
+                      f"{true_goal['spectral_radius']:.3f}, eigenvalue moduli "
+                      f"{', '.join(f'{v:.3f}' for v in true_goal['eigenvalue_moduli'])}.")
     lines += ["", "Spearman rank correlation with the % in goal:", "",
               "| models | n | " + " | ".join(DIAGNOSTICS) + " |",
               "|---|---|" + "---|" * len(DIAGNOSTICS)]
@@ -179,11 +218,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise SystemExit(f"No finished {args.env} runs of preset {args.preset!r} with a saved "
                          f"agent under {args.results_dir}.")
     corr = correlations(rows)
+    true_goal = true_goal_linearization_of(args.env)
     _write_json_atomic(Path(f"{args.output}.json"), {
         "command": " ".join(["python -m benchmarks.latent_diagnostics", *arguments]),
         "held_out_seed": HELD_OUT_SEED, "rows": rows, "spearman": corr,
+        "true_goal_linearization": true_goal,
     })
-    text = markdown(rows, corr)
+    text = markdown(rows, corr, true_goal)
     _write_text_atomic(Path(f"{args.output}.md"), text)
     print(text)
     return 0

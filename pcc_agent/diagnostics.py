@@ -21,6 +21,12 @@ regression, so any smooth one-to-one code counts, not only a linear one). Image 
 velocities only through small frame-to-frame shifts; a code without them cannot balance a
 cart-pole however good its dynamics are.
 
+A balancing task adds one more need. Its goal is an equilibrium of the true system, often an
+unstable one (an upright pole is a saddle), and a planner that linearizes the learned dynamics
+holds the goal only if they reproduce that. :func:`goal_linearization` linearizes the learned
+dynamics at the goal's code with no action; :func:`true_goal_linearization` does the same for
+the env's true dynamics, for comparison.
+
 On Planar (``benchmarks/latent_diagnostics.py``, docs/training.md) the consistency error
 tells the models that control well from those that do not.
 """
@@ -37,7 +43,15 @@ import torch
 from pcc_agent.losses import curvature_penalty
 from pcc_agent.model import EmbeddingModel
 
-__all__ = ["LatentDiagnostics", "knn_decodability", "latent_diagnostics", "state_decodability"]
+__all__ = [
+    "GoalLinearization",
+    "LatentDiagnostics",
+    "goal_linearization",
+    "knn_decodability",
+    "latent_diagnostics",
+    "state_decodability",
+    "true_goal_linearization",
+]
 
 
 @dataclass(frozen=True)
@@ -229,3 +243,107 @@ def state_decodability(
     finally:
         model.train(was_training)
     return knn_decodability(torch.cat(codes).numpy(), states, state_error, neighbours)
+
+
+@dataclass(frozen=True)
+class GoalLinearization:
+    """Dynamics ``x' = f(x, u)`` linearized at the goal with zero action.
+
+    ``A = df/dx`` and ``B = df/du`` at ``(x_g, 0)``.
+
+    Attributes:
+        drift: ``|| f(x_g, 0) - x_g ||`` divided by the given scale: how far one step with no
+            action moves the goal (0 at an equilibrium).
+        spectral_radius: Largest eigenvalue modulus of ``A``; above 1 the goal is unstable
+            (per step, so it depends on the control period).
+        eigenvalue_moduli: All eigenvalue moduli of ``A``, largest first.
+        controllability: Singular values of ``[B, AB, ..., A^(n-1) B]`` divided by the
+            largest, in decreasing order: near-zero values are directions the action
+            (almost) cannot move.
+    """
+
+    drift: float
+    spectral_radius: float
+    eigenvalue_moduli: tuple[float, ...]
+    controllability: tuple[float, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly representation."""
+        return asdict(self)
+
+
+def _linearization(
+    drift: float, A: np.ndarray, B: np.ndarray  # noqa: N803 (control notation)
+) -> GoalLinearization:
+    moduli = np.sort(np.abs(np.linalg.eigvals(A)))[::-1]
+    blocks, power = [], np.eye(len(A))
+    for _ in range(len(A)):
+        blocks.append(power @ B)
+        power = A @ power
+    singular = np.linalg.svd(np.hstack(blocks), compute_uv=False)
+    relative = singular / singular[0] if singular[0] > 0 else singular
+    return GoalLinearization(
+        drift=float(drift),
+        spectral_radius=float(moduli[0]),
+        eigenvalue_moduli=tuple(float(v) for v in moduli),
+        controllability=tuple(float(v) for v in relative),
+    )
+
+
+def goal_linearization(
+    model: EmbeddingModel, goal_obs: np.ndarray, scale: float = 1.0
+) -> GoalLinearization:
+    """The learned latent dynamics linearized at the goal's code ``z_g = mu(goal_obs)``.
+
+    Args:
+        model: A trained embedding model.
+        goal_obs: The goal observation ``uint8 obs_shape`` (the agent's or the env's
+            ``goal_observation()``).
+        scale: Divides the drift, e.g. ``LatentDiagnostics.latent_scale`` so that models
+            with latent spaces of different sizes compare.
+
+    Returns:
+        The :class:`GoalLinearization` of the latent dynamics' mean at ``(z_g, 0)``.
+    """
+    goal_obs = np.asarray(goal_obs)
+    if tuple(goal_obs.shape) != model.obs_shape:
+        raise ValueError(f"The goal observation has shape {goal_obs.shape}, the model expects "
+                         f"{model.obs_shape}.")
+    if not scale > 0:
+        raise ValueError(f"scale must be > 0, got {scale!r}.")
+    device = next(model.parameters()).device
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            goal = model.encode(torch.as_tensor(goal_obs[None], device=device))[0]
+            still = torch.zeros(1, model.action_dim, device=device)
+            drift = float((model.transition_mean(goal, still) - goal).norm()) / scale
+        A, B = model.planner_dynamics().jacobians(goal, still)  # noqa: N806
+    finally:
+        model.train(was_training)
+    return _linearization(drift, A[0].detach().cpu().double().numpy(),
+                          B[0].detach().cpu().double().numpy())
+
+
+def true_goal_linearization(env: Any, fd_step: float = 1e-5) -> GoalLinearization:
+    """The env's true dynamics linearized at its goal state (central finite differences).
+
+    Args:
+        env: A ``pcc_envs`` env with cheap batched true dynamics (``supports_oracle``),
+            wrapped or not.
+        fd_step: Central-difference step.
+
+    Returns:
+        The :class:`GoalLinearization` of the true one-step map at ``(goal_state, 0)``; its
+        drift is in state units.
+    """
+    from pcc_agent.oracle import TrueDynamics
+
+    base = getattr(env, "unwrapped", env)
+    dynamics = TrueDynamics(base, fd_step)
+    goal = torch.as_tensor(np.asarray(base.goal_state, dtype=np.float64)[None])
+    still = torch.zeros(1, base.action_space.shape[0], dtype=torch.float64)
+    moved = base.state_error(dynamics.step(goal, still).numpy(), goal.numpy())
+    A, B = dynamics.jacobians(goal, still)  # noqa: N806
+    return _linearization(float(np.linalg.norm(moved)), A[0].numpy(), B[0].numpy())

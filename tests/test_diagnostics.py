@@ -10,7 +10,13 @@ import pytest
 import torch
 
 from benchmarks import latent_diagnostics as cli
-from pcc_agent.diagnostics import knn_decodability, latent_diagnostics, state_decodability
+from pcc_agent.diagnostics import (
+    goal_linearization,
+    knn_decodability,
+    latent_diagnostics,
+    state_decodability,
+    true_goal_linearization,
+)
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import get_preset
 from pcc_envs.data import collect_transitions
@@ -81,6 +87,54 @@ def test_state_decodability_of_a_model_checks_its_input():
         state_decodability(model, data.obs[:, :, :20], data.state)
 
 
+def test_goal_linearization_of_a_constant_shift():
+    """f(z, u) = z + b exactly: drift ||b|| / scale, A = I (all moduli 1), B = 0."""
+    model = planar_model()
+    with torch.no_grad():
+        model.dynamics.head.weight.zero_()
+        model.dynamics.head.bias.zero_()
+        model.dynamics.head.bias[:2] = torch.tensor([0.3, -0.4])
+    goal = gym.make("pcc/Planar-v0").unwrapped.goal_observation()
+    found = goal_linearization(model, goal, scale=2.0)
+    assert found.drift == pytest.approx(0.25, rel=1e-5)
+    assert found.eigenvalue_moduli == pytest.approx((1.0, 1.0), abs=1e-6)
+    assert found.spectral_radius == pytest.approx(1.0, abs=1e-6)
+    assert found.controllability == (0.0, 0.0)
+    with pytest.raises(ValueError, match="model expects"):
+        goal_linearization(model, goal[:, :20])
+    with pytest.raises(ValueError, match="scale must be > 0"):
+        goal_linearization(model, goal, scale=0.0)
+
+
+def test_goal_linearization_matches_autograd_jacobian():
+    """The eigenvalues come from the same A that reverse-mode autograd gives at (z_g, 0)."""
+    model = planar_model().eval()
+    goal = gym.make("pcc/Planar-v0").unwrapped.goal_observation()
+    with torch.no_grad():
+        z_goal = model.encode(torch.as_tensor(goal[None]))[0][0]
+    A = torch.autograd.functional.jacobian(  # noqa: N806
+        lambda z: model.transition_mean(z[None], torch.zeros(1, 2))[0], z_goal)
+    expected = np.sort(np.abs(np.linalg.eigvals(A.double().numpy())))[::-1]
+    found = goal_linearization(model, goal)
+    assert found.eigenvalue_moduli == pytest.approx(tuple(expected), rel=1e-4)
+    assert found.controllability[0] == 1.0 and len(found.controllability) == 2
+
+
+def test_true_goal_linearization_of_the_upright_cart_pole():
+    """The upright pole's unstable rate is sqrt(g (M + m) / (l (4/3 (M + m) - m))) per second;
+    one 20 ms RK4 step multiplies it by exp(rate * dt)."""
+    env = gym.make("pcc/CartPole-v0")
+    params = env.unwrapped.params
+    total = params.cart_mass + params.pole_mass
+    rate = np.sqrt(params.gravity * total
+                   / (params.pole_half_length * (4.0 / 3.0 * total - params.pole_mass)))
+    found = true_goal_linearization(env)
+    assert found.drift == 0.0
+    assert found.spectral_radius == pytest.approx(np.exp(rate * env.unwrapped.dt), rel=1e-5)
+    assert found.eigenvalue_moduli[-1] == pytest.approx(np.exp(-rate * env.unwrapped.dt),
+                                                        rel=1e-5)
+
+
 def test_spearman_matches_known_values():
     assert cli.spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
     assert cli.spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
@@ -104,10 +158,15 @@ def test_cli_on_a_tiny_grid(tmp_path):
     assert [row["seed"] for row in result["rows"]] == [0, 1, 2]
     assert result["spearman"]["pcc"]["n_models"] == 3
     assert "--preset tiny" in result["command"]
-    assert "| pcc | 2 |" in out.with_name(out.name + ".md").read_text()
+    text = out.with_name(out.name + ".md").read_text()
+    assert "| pcc | 2 |" in text
+    # Planar's true dynamics are x + u: every eigenvalue is 1.
+    assert "The true dynamics at the goal state: spectral radius 1.000" in text
+    assert result["true_goal_linearization"]["eigenvalue_moduli"] == pytest.approx([1.0, 1.0])
     for row in result["rows"]:
         assert len(row["state_r2"]) == 2
         assert row["min_state_r2"] == pytest.approx(min(row["state_r2"]), abs=1e-4)
+        assert row["goal_drift"] >= 0 and row["goal_spectral_radius"] > 0
     with pytest.raises(SystemExit, match="at least 30"):
         cli.main(["--results-dir", str(tmp_path), "--preset", "tiny", "--samples", "20",
                   "--output", str(out)])
