@@ -156,10 +156,15 @@ class BernoulliDecoder(nn.Module):
         if self.kind == "mlp":
             self.net = mlp([config.latent_dim, *config.decoder_hidden, frames * height * width])
             return
-        if config.decoder_convs[-1].channels != frames:
+        self.output_upsample = config.decoder_output_upsample
+        self.pixel_shuffle = config.decoder_pixel_shuffle
+        out_channels = frames * self.output_upsample**2 if self.pixel_shuffle else frames
+        if config.decoder_convs[-1].channels != out_channels:
+            per_frame = (f"{self.output_upsample}^2 per observation frame, for the pixel shuffle"
+                         if self.pixel_shuffle else "one per observation frame")
             raise ValueError(
-                f"The last decoder ConvSpec must have {frames} channels (one per observation "
-                f"frame), got {config.decoder_convs[-1].channels}."
+                f"The last decoder ConvSpec must have {out_channels} channels ({per_frame}), "
+                f"got {config.decoder_convs[-1].channels}."
             )
         scale = 2 ** (len(config.decoder_convs) - 1) * config.decoder_output_upsample
         self.grid = (config.decoder_grid_channels, math.ceil(height / scale),
@@ -176,27 +181,32 @@ class BernoulliDecoder(nn.Module):
                 layers += [nn.ReLU(), nn.Upsample(scale_factor=2, mode="nearest")]
             channels = spec.channels
         self.convs = nn.Sequential(*layers)
-        self.output_upsample = config.decoder_output_upsample
 
     @torch.no_grad()
     def init_output_bias(self, images: torch.Tensor, eps: float = 1e-3) -> None:
         """Set the output biases to the logits of the mean of float images ``(N, F, H, W)``.
 
         The MLP decoder gets one bias per pixel (the mean image); the CNN decoder, whose last
-        convolution has one bias per frame, gets the logit of each frame's mean intensity.
+        convolution has one bias per frame (per frame and sub-pixel position with the pixel
+        shuffle), gets the logit of each frame's mean intensity.
         """
         mean = images.mean(0).clamp(eps, 1.0 - eps)
         if self.kind == "mlp":
             self.net[-1].bias.copy_(torch.logit(mean).reshape(-1))
-        else:
-            self.convs[-1].bias.copy_(torch.logit(mean.mean(dim=(1, 2))))
+            return
+        per_frame = torch.logit(mean.mean(dim=(1, 2)))
+        if self.pixel_shuffle:
+            per_frame = per_frame.repeat_interleave(self.output_upsample**2)
+        self.convs[-1].bias.copy_(per_frame)
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         """Return the Bernoulli logits of D(x | z), shaped ``(B, F, H, W)``."""
         if self.kind == "mlp":
             return self.net(z).view(z.shape[0], *self.obs_shape)
         x = self.convs(self.fc(z).view(z.shape[0], *self.grid))
-        if self.output_upsample > 1:
+        if self.pixel_shuffle:
+            x = F.pixel_shuffle(x, self.output_upsample)
+        elif self.output_upsample > 1:
             x = F.interpolate(x, scale_factor=self.output_upsample, mode="nearest")
         return x[..., : self.obs_shape[1], : self.obs_shape[2]]
 
@@ -208,7 +218,7 @@ class BernoulliDecoder(nn.Module):
         mean_i t_i)``, so the likelihood is computed exactly at low resolution against the
         average-pooled target (k^2 times cheaper, no upsampling in the graph).
         """
-        k = self.output_upsample if self.kind == "cnn" else 1
+        k = self.output_upsample if self.kind == "cnn" and not self.pixel_shuffle else 1
         _, height, width = self.obs_shape
         if k > 1 and height % k == 0 and width % k == 0:
             low = self.convs(self.fc(z).view(z.shape[0], *self.grid))

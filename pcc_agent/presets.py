@@ -70,8 +70,14 @@ class ModelConfig:
         decoder_grid_channels: Channels of that grid (CNN decoder only).
         decoder_convs: CNN decoder convolutions; a 2x nearest upsampling follows every one but
             the last, whose channels must equal the number of observation frames.
-        decoder_output_upsample: Final nearest upsampling of the logits (1 = none); the logits
-            are cropped to the observation size.
+        decoder_output_upsample: Final upsampling factor k of the logits (1 = none); the
+            logits are cropped to the observation size.
+        decoder_pixel_shuffle: How the last k x upsampling is done. False: nearest
+            upsampling, so every k x k block of pixels shares one logit (the likelihood is
+            exact and cheap at low resolution, but blind to shifts smaller than a block).
+            True: the last convolution outputs ``frames * k * k`` channels, rearranged by a
+            pixel shuffle into one logit per full-resolution pixel, at little extra cost; the
+            likelihood then sees one-pixel motions, the velocity signal of a frame pair.
         transition_kind: ``"mlp"``: Gaussian MLP with a skip connection (PCC, mean = z + MLP);
             ``"e2c_linear"``: locally-linear ``z' = A(z) z + B(z) u + o(z)``, A = I + v r^T
             (E2C and RCE).
@@ -104,6 +110,7 @@ class ModelConfig:
     decoder_grid_channels: int = 10
     decoder_convs: tuple[ConvSpec, ...] = ()
     decoder_output_upsample: int = 1
+    decoder_pixel_shuffle: bool = False
     transition_kind: TransitionKind = "mlp"
     transition_hidden: tuple[int, ...] = (20, 20)
     amortized: bool = False
@@ -133,6 +140,12 @@ class ModelConfig:
             raise ValueError("decoder_kind='cnn' needs at least one ConvSpec in decoder_convs.")
         if self.encoder_downsample < 1 or self.decoder_output_upsample < 1:
             raise ValueError("encoder_downsample and decoder_output_upsample must be >= 1.")
+        if self.decoder_pixel_shuffle and (
+            self.decoder_kind != "cnn" or self.decoder_output_upsample < 2
+        ):
+            raise ValueError(
+                "decoder_pixel_shuffle needs decoder_kind='cnn' and decoder_output_upsample >= 2."
+            )
         if self.amortized and self.transition_kind != "mlp":
             raise ValueError("amortized A/B heads only apply to transition_kind='mlp'.")
 

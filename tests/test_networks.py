@@ -147,3 +147,49 @@ def test_low_resolution_likelihood_is_exact(env_id):
     obs = torch.randint(0, 256, (3, *OBS_SHAPES[env_id]), dtype=torch.uint8, generator=g)
     expected = bernoulli_log_likelihood(model.decode_logits(z), obs.float() / 255)
     torch.testing.assert_close(model.log_likelihood(z, obs), expected, rtol=1e-5, atol=1e-2)
+
+
+def _pixel_shuffle_config(last_channels: int = 2 * 16) -> ModelConfig:
+    """The CartPole fast CNN with a pixel-shuffled 4x output instead of nearest upsampling."""
+    base = get_preset("pcc/CartPole-v0", "fast").model
+    convs = (*base.decoder_convs[:-1], dataclasses.replace(base.decoder_convs[-1],
+                                                           channels=last_channels))
+    return dataclasses.replace(base, decoder_convs=convs, decoder_pixel_shuffle=True)
+
+
+def test_pixel_shuffle_decoder_gives_every_pixel_its_own_logit():
+    """Nearest upsampling repeats one logit over each 4x4 block; the pixel shuffle does not,
+    and its likelihood is the plain full-resolution one."""
+    from pcc_agent.distributions import bernoulli_log_likelihood
+
+    shape = OBS_SHAPES["pcc/CartPole-v0"]
+    g = torch.Generator().manual_seed(0)
+    z = torch.randn(3, 8, generator=g)
+    obs = torch.randint(0, 256, (3, *shape), dtype=torch.uint8, generator=g)
+    model = EmbeddingModel(shape, 1, _pixel_shuffle_config(), seed=0)
+    logits = model.decode_logits(z)
+    assert logits.shape == (3, *shape)
+    blocks = logits.unfold(2, 4, 4).unfold(3, 4, 4).reshape(3, 2, 20, 20, 16)
+    assert (blocks.std(dim=-1) > 0).all(), "a 4x4 block shares one logit"
+    expected = bernoulli_log_likelihood(logits, obs.float() / 255)
+    torch.testing.assert_close(model.log_likelihood(z, obs), expected)
+
+
+def test_pixel_shuffle_checks_its_configuration():
+    shape = OBS_SHAPES["pcc/CartPole-v0"]
+    with pytest.raises(ValueError, match=r"32 channels \(4\^2 per observation frame"):
+        EmbeddingModel(shape, 1, _pixel_shuffle_config(last_channels=2), seed=0)
+    with pytest.raises(ValueError, match="decoder_pixel_shuffle needs"):
+        dataclasses.replace(get_preset("pcc/Planar-v0").model, decoder_pixel_shuffle=True)
+
+
+def test_pixel_shuffle_output_bias_starts_from_each_frames_mean():
+    shape = OBS_SHAPES["pcc/CartPole-v0"]
+    model = EmbeddingModel(shape, 1, _pixel_shuffle_config(), seed=0)
+    images = torch.zeros(4, *shape)
+    images[:, 0, :20] = 1.0  # frame 0: a quarter of its pixels on, frame 1: none
+    model.decoder.init_output_bias(images, eps=1e-3)  # pixel means are clamped to [eps, 1-eps]
+    first = torch.logit(torch.tensor(0.25 * (1 - 1e-3) + 0.75 * 1e-3))
+    second = torch.logit(torch.tensor(1e-3))
+    bias = model.decoder.convs[-1].bias
+    torch.testing.assert_close(bias, torch.cat([first.repeat(16), second.repeat(16)]))
