@@ -475,7 +475,8 @@ def _ignore_cancelled_future_race(args: threading.ExceptHookArgs) -> None:
     failed and prints an ``InvalidStateError`` traceback after the clean exit message (Python
     3.12 ignores that case itself). Every other thread error goes to the default hook.
     """
-    if not isinstance(args.exc_value, InvalidStateError):
+    manager = type(args.thread).__name__ == "_ExecutorManagerThread"
+    if not (manager and isinstance(args.exc_value, InvalidStateError)):
         threading.__excepthook__(args)
 
 
@@ -582,7 +583,8 @@ def pool_outcomes(
             future.cancel()
         pool.shutdown(wait=False, cancel_futures=True)
         # Runs in progress stop too (their last epoch checkpoint is kept), also when the signal
-        # reached only this process (SIGTERM, or SIGINT sent to one pid).
+        # reached only this process (SIGTERM, or SIGINT sent to one pid). The grid's pool
+        # workers are the only child processes the driver starts.
         for worker in multiprocessing.active_children():
             worker.terminate()
         print("Stopped: queued runs cancelled.", file=sys.stderr, flush=True)
