@@ -33,7 +33,8 @@ tells the models that control well from those that do not.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -52,6 +53,17 @@ __all__ = [
     "state_decodability",
     "true_goal_linearization",
 ]
+
+
+@contextlib.contextmanager
+def _eval_mode(model: EmbeddingModel) -> Iterator[None]:
+    """Run the body with ``model`` in eval mode, restoring its train/eval mode after."""
+    was_training = model.training
+    model.eval()
+    try:
+        yield
+    finally:
+        model.train(was_training)
 
 
 @dataclass(frozen=True)
@@ -105,10 +117,8 @@ def latent_diagnostics(
         raise ValueError(f"Actions must be (N, {model.action_dim}), got {action.shape}.")
     device = next(model.parameters()).device
     generator = torch.Generator().manual_seed(seed)
-    was_training = model.training
-    model.eval()
     means, errors, curvatures = [], [], []
-    try:
+    with _eval_mode(model):
         for start in range(0, len(obs), batch_size):
             part = slice(start, start + batch_size)
             x_t = torch.as_tensor(obs[part], device=device)
@@ -124,8 +134,6 @@ def latent_diagnostics(
             means.append(mu_t)
             errors.append((predicted - mu_next).pow(2).sum(-1))
             curvatures.append(residual.detach())
-    finally:
-        model.train(was_training)
     latent = torch.cat(means)
     scale = float(latent.std(dim=0).mean()) if len(latent) > 1 else 1.0
     return LatentDiagnostics(
@@ -234,14 +242,9 @@ def state_decodability(
         raise ValueError(f"Observations have shape {obs.shape[1:]}, the model expects "
                          f"{model.obs_shape}.")
     device = next(model.parameters()).device
-    was_training = model.training
-    model.eval()
-    try:
-        with torch.no_grad():
-            codes = [model.encode(torch.as_tensor(obs[i:i + batch_size], device=device))[0].cpu()
-                     for i in range(0, len(obs), batch_size)]
-    finally:
-        model.train(was_training)
+    with _eval_mode(model), torch.no_grad():
+        codes = [model.encode(torch.as_tensor(obs[i:i + batch_size], device=device))[0].cpu()
+                 for i in range(0, len(obs), batch_size)]
     return knn_decodability(torch.cat(codes).numpy(), states, state_error, neighbours)
 
 
@@ -312,16 +315,12 @@ def goal_linearization(
     if not scale > 0:
         raise ValueError(f"scale must be > 0, got {scale!r}.")
     device = next(model.parameters()).device
-    was_training = model.training
-    model.eval()
-    try:
+    with _eval_mode(model):
         with torch.no_grad():
             goal = model.encode(torch.as_tensor(goal_obs[None], device=device))[0]
             still = torch.zeros(1, model.action_dim, device=device)
             drift = float((model.transition_mean(goal, still) - goal).norm()) / scale
         A, B = model.planner_dynamics().jacobians(goal, still)  # noqa: N806
-    finally:
-        model.train(was_training)
     return _linearization(drift, A[0].detach().cpu().double().numpy(),
                           B[0].detach().cpu().double().numpy())
 
