@@ -147,19 +147,28 @@ def _resume_point(
 
     A checkpoint of other training settings or another architecture, a finished training
     (the run was killed during its control tasks) or an unreadable file is deleted: the run
-    trains from scratch.
+    trains from scratch. Both sides are compared after filling in the configs' defaults, so
+    a config field added to the library later (with a default that keeps the old behaviour)
+    does not throw away a checkpoint written before it existed.
     """
     from pcc_agent.checkpoint import CheckpointError, load_checkpoint
+    from pcc_agent.presets import ModelConfig, TrainConfig
+
+    def normalized(train: dict[str, Any], arch: dict[str, Any]) -> Any:
+        model = ModelConfig.from_dict(arch["model_config"])
+        return json.loads(json.dumps([
+            TrainConfig.from_dict(train).to_dict(),
+            {**arch, "model_config": model.to_dict()},
+        ]))
 
     if not path.exists():
         return None
-    wanted = json.loads(json.dumps(train_config.to_dict()))
     try:
         saved = load_checkpoint(path)
         usable = (not saved.extra.get("finished")
-                  and saved.config.get("train_config") == wanted
-                  and saved.architecture == json.loads(json.dumps(architecture)))
-    except CheckpointError:
+                  and normalized(saved.config.get("train_config") or {}, saved.architecture)
+                  == normalized(train_config.to_dict(), architecture))
+    except (CheckpointError, KeyError, TypeError, ValueError):
         usable = False
     if usable:
         history = saved.extra.get("history", [])

@@ -158,6 +158,18 @@ def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_pa
     write_unfinished()
     point = _resume_point(path, config, arch)
     assert point.epoch == 1 and point.seconds > 0
+    # Written before a config field with a default existed: still continued.
+    older_arch = {**saved.architecture, "model_config": {
+        k: v for k, v in saved.architecture["model_config"].items()
+        if k != "decoder_pixel_shuffle"}}
+    older_config = dict(saved.config)
+    older_config["train_config"] = {k: v for k, v in saved.config["train_config"].items()
+                                    if k != "kl_scale"}
+    model.architecture = lambda: older_arch  # as the library described it back then
+    save_checkpoint(path, model, older_config, extra=unfinished, state=saved.state)
+    del model.architecture
+    assert load_checkpoint(path).architecture == older_arch
+    assert _resume_point(path, config, arch).epoch == 1
     path.write_bytes(b"cut short")
     assert _resume_point(path, config, arch) is None and not path.exists()
 
