@@ -154,20 +154,16 @@ def _resume_point(
     from pcc_agent.checkpoint import CheckpointError, load_checkpoint
     from pcc_agent.presets import ModelConfig, TrainConfig
 
-    def normalized(train: dict[str, Any], arch: dict[str, Any]) -> Any:
-        model = ModelConfig.from_dict(arch["model_config"])
-        return json.loads(json.dumps([
-            TrainConfig.from_dict(train).to_dict(),
-            {**arch, "model_config": model.to_dict()},
-        ]))
-
     if not path.exists():
         return None
     try:
         saved = load_checkpoint(path)
         usable = (not saved.extra.get("finished")
-                  and normalized(saved.config.get("train_config") or {}, saved.architecture)
-                  == normalized(train_config.to_dict(), architecture))
+                  and TrainConfig.from_dict(saved.config.get("train_config") or {})
+                  == train_config
+                  and saved.model_config == ModelConfig.from_dict(architecture["model_config"])
+                  and list(saved.architecture["obs_shape"]) == list(architecture["obs_shape"])
+                  and saved.architecture["action_dim"] == architecture["action_dim"])
     except (CheckpointError, KeyError, TypeError, ValueError):
         usable = False
     if usable:
