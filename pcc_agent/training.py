@@ -117,7 +117,7 @@ class TrainResult:
         best_validation_loss: Lowest validation loss (training loss without a validation split).
         best_epoch: Epoch (1-based) of that loss; its weights are in the model on return.
         epochs: Epochs run in total (including resumed ones).
-        wall_time: Seconds spent in this call.
+        wall_time: Seconds spent in this call (a resumed run's earlier sittings excluded).
         converged: Early stopping triggered (no improvement for ``patience`` epochs).
         diverged: Training stopped on a non-finite or exploding loss.
         message: Human-readable reason of the stop.
@@ -132,6 +132,19 @@ class TrainResult:
     diverged: bool = False
     message: str = ""
 
+    def seconds_per_epoch(self) -> float | None:
+        """Mean wall-clock seconds of one epoch, over every epoch of every sitting.
+
+        Taken from the per-epoch times in ``history``, which a resumed run restores, so that
+        a run resumed near its end does not report its last sitting's time spread over all
+        epochs. Falls back to ``wall_time / epochs`` for a history without times.
+        """
+        times = [row["time/epoch_seconds"] for row in self.history
+                 if "time/epoch_seconds" in row]
+        if times:
+            return float(sum(times) / len(times))
+        return self.wall_time / self.epochs if self.epochs else None
+
     def summary(self) -> dict[str, Any]:
         """JSON-serializable outcome without the per-epoch history (last epoch's terms kept).
 
@@ -145,7 +158,7 @@ class TrainResult:
             "best_validation_loss": (self.best_validation_loss
                                      if math.isfinite(self.best_validation_loss) else None),
             "wall_time": self.wall_time,
-            "seconds_per_epoch": self.wall_time / self.epochs if self.epochs else None,
+            "seconds_per_epoch": self.seconds_per_epoch(),
             "converged": self.converged,
             "diverged": self.diverged,
             "message": self.message,

@@ -92,6 +92,9 @@ def test_checkpoint_round_trip_and_resume(tmp_path):
     resumed_model, resumed = _train(data, config=dataclasses.replace(config, epochs=3),
                                     checkpoint_path=path, resume=True)
     assert resumed.epochs == 3 and len(resumed.history) == 3
+    # The speed covers all three epochs, not this sitting's one epoch spread over three.
+    epoch_times = [row["time/epoch_seconds"] for row in resumed.history]
+    assert resumed.summary()["seconds_per_epoch"] == pytest.approx(sum(epoch_times) / 3)
     straight, _ = _train(data, config=dataclasses.replace(config, epochs=3))
     for a, b in zip(straight.state_dict().values(), resumed_model.state_dict().values()):
         assert torch.equal(a, b)  # resuming continues exactly where an uninterrupted run is
