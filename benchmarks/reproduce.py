@@ -228,6 +228,8 @@ def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any]
         return None
     if spec is not None and not _same_planner(record, spec):
         return None
+    if spec is not None and not _same_recipe(record, spec):
+        return None
     return record
 
 
@@ -274,6 +276,32 @@ def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
     return config.get("planner") == wanted
 
 
+def _same_recipe(record: dict[str, Any], spec: RunSpec) -> bool:
+    """Whether a record's model was trained with the preset's data, network and training.
+
+    Compared as dataclasses, so a config field added to the library later (with a default
+    that keeps the old behaviour) leaves older records valid. The training seed is the run's
+    own (``spec.seed``, checked with the spec), not the preset's. Oracle records train
+    nothing and always match.
+    """
+    if spec.method == ORACLE:
+        return True
+    from pcc_agent.losses import model_config_for_method
+    from pcc_agent.presets import DataConfig, ModelConfig, TrainConfig
+
+    config = record.get("config", {})
+    preset = _preset_for(spec)
+    try:
+        train = TrainConfig.from_dict(config["train"])
+        model = ModelConfig.from_dict(config["model"])
+        data = DataConfig(**config["data"])
+    except (KeyError, TypeError, ValueError):
+        return False
+    return (replace(train, seed=preset.train.seed) == preset.train
+            and model == model_config_for_method(preset.model, spec.method)
+            and data == preset.data)
+
+
 def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = None) -> dict:
     """Train one model and run its control tasks; write and return the run record.
 
@@ -298,6 +326,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         trained is not None
         and spec.method != ORACLE
         and _same_spec(trained.get("spec"), spec)
+        and _same_recipe(trained, spec)
         and checkpoint_path(results_dir, spec).exists()
     ):
         return _reevaluate(trained, spec, Path(results_dir), seeds, env_kwargs)
@@ -764,10 +793,18 @@ def paper_table(row: dict[str, Any]) -> str:
 
 
 def _models_cell(row: dict[str, Any]) -> str:
-    """``"10 x 10"``, or ``"3 of 10 x 10 (reduced grid)"`` when models are missing."""
+    """The models-x-tasks cell: ``"10 x 10"``, or the difference from the preset's grid.
+
+    ``"3 of 10 x 10 (reduced grid)"`` when models are missing; ``"12 x 10 (2 beyond the
+    preset's 10)"`` when extra seeds were run (top-1 is then the best of more models than the
+    protocol's).
+    """
     planned = row.get("n_models_planned")
     if planned is not None and row["n_models"] < planned:
         return f"{row['n_models']} of {planned} x {row['n_tasks']} (reduced grid)"
+    if planned is not None and row["n_models"] > planned:
+        return (f"{row['n_models']} x {row['n_tasks']} ({row['n_models'] - planned} beyond "
+                f"the preset's {planned})")
     return f"{row['n_models']} x {row['n_tasks']}"
 
 
@@ -857,6 +894,10 @@ def load_records(results_dir: Path) -> list[dict[str, Any]]:
         if not _same_planner(rec, spec):
             print(f"Not aggregated (evaluated by another planner revision or with other planner "
                   f"settings than the preset's; re-run the grid to re-evaluate it): {path}")
+            continue
+        if not _same_recipe(rec, spec):
+            print(f"Not aggregated (trained with other data, network or training settings than "
+                  f"the preset's; re-run the grid to retrain it): {path}")
             continue
         records.append(rec)
     return records

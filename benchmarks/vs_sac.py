@@ -105,11 +105,13 @@ def load_finished_sac_run(
     checkpoints: Sequence[int],
     task_seed_list: Sequence[int],
     reward: str,
+    buffer_size: int,
 ) -> dict[str, Any] | None:
     """A finished run's record, or None if it is missing or stale.
 
-    Stale: made with other steps, checkpoints, task seeds or reward (not the curve asked
-    for). Records without a ``reward`` key were trained on the dense reward.
+    Stale: made with other steps, checkpoints, task seeds, reward or replay-buffer size (not
+    the agent or curve asked for). Records without a ``reward`` key were trained on the dense
+    reward.
     """
     record = _read_record(path)
     if (
@@ -119,6 +121,7 @@ def load_finished_sac_run(
         or [p["env_steps"] for p in record.get("curve", [])] != list(checkpoints)
         or record.get("task_seeds") != list(task_seed_list)
         or record.get("reward", "dense") != reward
+        or record.get("buffer_size") != buffer_size
     ):
         return None
     return record
@@ -180,7 +183,8 @@ def run_sac(
         raise ValueError(f"save_every must be at least 1 step, got {save_every}")
     path = sac_run_path(results_dir, env_id, observation, steps, seed, reward)
     wanted = sorted({c for c in checkpoints if c <= steps} | {steps})
-    record = load_finished_sac_run(path, steps, wanted, task_seed_list, reward)
+    record = load_finished_sac_run(path, steps, wanted, task_seed_list, reward,
+                                   min(buffer_size, steps))
     if record is not None:
         sac_state.state_path(path).unlink(missing_ok=True)  # left by a crash after the record
         return record
@@ -492,7 +496,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="SAC environment steps.")
     parser.add_argument(
         "--checkpoints",
-        type=int,
+        type=_positive_int,
         nargs="+",
         default=None,
         help="Env-step counts at which SAC is evaluated (default: the PCC "
@@ -510,11 +514,11 @@ def build_parser() -> argparse.ArgumentParser:
         "the goal) or 'sparse' (1 per step in the goal region, the metric itself).",
     )
     parser.add_argument(
-        "--num-tasks", type=int, default=REPRODUCE_PRESETS["paper"].num_tasks,
+        "--num-tasks", type=_positive_int, default=REPRODUCE_PRESETS["paper"].num_tasks,
         help="Control tasks per evaluation (the reproduction pipeline's task seeds).",
     )
     parser.add_argument(
-        "--buffer-size", type=int, default=100_000,
+        "--buffer-size", type=_positive_int, default=100_000,
         help="Replay buffer in transitions (100,000 80x80x2 transitions take about 2.6 GB).",
     )
     parser.add_argument(
@@ -538,7 +542,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m benchmarks.vs_sac``."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    beyond = [c for c in args.checkpoints or [] if c > args.steps]
+    if beyond:
+        parser.error(f"--checkpoints {beyond} lie beyond --steps {args.steps}; SAC would never "
+                     "reach them.")
     import torch
 
     from pcc_agent.evaluation import task_seeds
@@ -548,6 +557,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     seeds = task_seeds(REPRODUCE_PRESETS["paper"].task_seed, args.num_tasks)
     if not args.aggregate_only:
         dataset_size = get_preset(args.env).data.num_samples
+        if args.checkpoints is None and dataset_size > args.steps:
+            print(f"Note: the PCC data-set size ({dataset_size:,} transitions) is beyond --steps "
+                  f"{args.steps:,}; the curve has no equal-sample point.")
         checkpoints = args.checkpoints or sorted(
             {dataset_size, *np.geomspace(1000, args.steps, 4).astype(int).tolist()}
         )

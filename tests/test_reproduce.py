@@ -210,17 +210,30 @@ def test_interquartile_mean():
 def test_record_of_other_settings_is_stale(tmp_path):
     spec = tiny_spec()
     path = tmp_path / spec.relative_path
-    from pcc_agent.presets import get_preset
+    from benchmarks.reproduce import _preset_for
+    from pcc_agent.agent import PCCAgent
 
-    planner = json.loads(json.dumps(dataclasses.asdict(get_preset(spec.env_id).planner)))
+    agent = PCCAgent(spec.env_id, method=spec.method, preset=_preset_for(spec), seed=spec.seed)
+    config = json.loads(json.dumps(agent.config_dict()))  # what execute_run records
     record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": [],
-              "config": {"planner": planner, "planner_revision": PLANNER_REVISION}}
+              "config": config}
     path.parent.mkdir(parents=True)
     path.write_text(json.dumps(record))
     assert load_finished_run(path, spec) is not None
+    # Trained with other training, network or data settings than the preset's: stale.
+    for section, key, value in (("train", "lr", 1.0), ("model", "latent_dim", 7),
+                                ("data", "num_samples", 99)):
+        other = {**config, section: {**config[section], key: value}}
+        path.write_text(json.dumps({**record, "config": other}))
+        assert load_finished_run(path, spec) is None, section
+    # A record written before a config field existed (absent: its default) still counts.
+    older_model = {k: v for k, v in config["model"].items() if k != "decoder_pixel_shuffle"}
+    path.write_text(json.dumps({**record, "config": {**config, "model": older_model}}))
+    assert load_finished_run(path, spec) is not None
+    path.write_text(json.dumps(record))
     # Evaluated by an older planner (a record without a revision is revision 1): stale.
-    for old in ({**record["config"], "planner_revision": PLANNER_REVISION - 1},
-                {"planner": planner}):
+    without_revision = {k: v for k, v in config.items() if k != "planner_revision"}
+    for old in ({**config, "planner_revision": PLANNER_REVISION - 1}, without_revision):
         path.write_text(json.dumps({**record, "config": old}))
         assert load_finished_run(path, spec) is None
     path.write_text(json.dumps(record))
@@ -439,6 +452,8 @@ def test_summary_says_which_table_and_when_the_grid_is_reduced():
                                                                      "Table 3"]
     full = aggregate([rec("pcc", s) for s in range(10)])[0]
     assert _models_cell(full) == "10 x 2"
+    beyond = aggregate([rec("pcc", s) for s in range(12)])[0]
+    assert _models_cell(beyond) == "12 x 2 (2 beyond the preset's 10)"
 
 
 def test_oracle_record_of_other_oracle_settings_is_stale(tmp_path):

@@ -50,14 +50,29 @@ def test_vs_sac_tiny_budget(tmp_path):
 def test_finished_sac_run_with_other_tasks_is_not_reused(tmp_path):
     path = tmp_path / "seed0.json"
     record = {"status": "done", "steps": 120, "curve": [{"env_steps": 60}, {"env_steps": 120}],
-              "task_seeds": [1, 2]}
+              "task_seeds": [1, 2], "buffer_size": 120}
     path.write_text(json.dumps(record))
-    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2], "dense") is not None
-    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2, 3], "dense") is None
-    assert vs_sac.load_finished_sac_run(path, 120, [30, 60, 120], [1, 2], "dense") is None
-    assert vs_sac.load_finished_sac_run(path, 200, [60, 200], [1, 2], "dense") is None
+    load = vs_sac.load_finished_sac_run
+    assert load(path, 120, [60, 120], [1, 2], "dense", 120) is not None
+    assert load(path, 120, [60, 120], [1, 2, 3], "dense", 120) is None
+    assert load(path, 120, [30, 60, 120], [1, 2], "dense", 120) is None
+    assert load(path, 200, [60, 200], [1, 2], "dense", 120) is None
     # A record without a reward key was trained on the dense reward.
-    assert vs_sac.load_finished_sac_run(path, 120, [60, 120], [1, 2], "sparse") is None
+    assert load(path, 120, [60, 120], [1, 2], "sparse", 120) is None
+    # Another replay-buffer size is another agent.
+    assert load(path, 120, [60, 120], [1, 2], "dense", 100) is None
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--steps", "100", "--checkpoints", "50", "200"], "beyond --steps 100"),
+    (["--checkpoints", "0"], "--checkpoints"),
+    (["--num-tasks", "0"], "--num-tasks"),
+    (["--buffer-size", "-5"], "--buffer-size"),
+])
+def test_bad_command_line_is_refused(tmp_path, capsys, args, message):
+    with pytest.raises(SystemExit) as exit_info:
+        vs_sac.main([*args, "--results-dir", str(tmp_path)])
+    assert exit_info.value.code == 2 and message in capsys.readouterr().err
 
 
 def test_dense_reward_is_its_own_agent_and_curve(tmp_path):
@@ -100,22 +115,20 @@ def test_model_based_points_are_per_preset(tmp_path):
 
 def test_restarts_model_counts_the_data_of_every_training(tmp_path):
     """A best-of-2 model consumed two data sets: its point sits at 2 x 5000 samples."""
-    from dataclasses import asdict
-
     from benchmarks.reproduce import RunSpec, _preset_for, _write_json_atomic
-    from pcc_agent.planning import PLANNER_REVISION
+    from pcc_agent.agent import PCCAgent
 
     for seed, loss, score in ((0, 140.0, 20.0), (1000, 130.0, 70.0)):
         spec = {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0, "seed": seed,
                 "preset": "paper-fast-long", "model_variant": "fast", "num_tasks": 10,
                 "task_seed": 2020, "max_epochs": 1000, "patience": 100}
-        planner = json.loads(json.dumps(asdict(_preset_for(RunSpec(**spec)).planner)))
+        agent = PCCAgent(spec["env_id"], method="pcc", preset=_preset_for(RunSpec(**spec)),
+                         seed=seed)
         _write_json_atomic(
             tmp_path / "runs" / f"seed{seed}.json",
             {"format": 1, "status": "done", "percentages": [score], "mean": score,
              "train_seconds": 1.0, "training": {"best_validation_loss": loss}, "spec": spec,
-             "config": {"data": {"num_samples": 5000}, "planner": planner,
-                        "planner_revision": PLANNER_REVISION}},
+             "config": json.loads(json.dumps(agent.config_dict()))},
         )
     points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)["model_based"]
     assert points["pcc (paper-fast-long)"]["num_samples"] == 5000
