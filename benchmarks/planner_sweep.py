@@ -42,7 +42,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     import torch
 
     from pcc_agent import PCCAgent
-    from pcc_agent.evaluation import evaluate_control, task_seeds
+    from pcc_agent.evaluation import evaluate_control, format_mean_se, task_seeds
 
     torch.set_num_threads(1)
     agent = PCCAgent.load(args.checkpoint)
@@ -70,7 +70,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         }
         rows.append(row)
         print(f"plan {plan_length:4d} kappa {kappa:6g} R {r_weight:6g} mpc iters "
-              f"{mpc_iterations}: {row['mean']:.1f} ± {row['se']:.1f} % in goal", flush=True)
+              f"{mpc_iterations}: {format_mean_se(row['mean'], row['se'])} % in goal", flush=True)
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(rows, indent=1))

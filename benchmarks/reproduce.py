@@ -708,6 +708,8 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     Restart trainings (:func:`is_restart_training`) are left out: pass the records of
     :func:`select_restarts` to get the rows of the ``restarts`` presets.
     """
+    from pcc_agent.evaluation import standard_error
+
     groups: dict[tuple[str, str, float, str], list[dict[str, Any]]] = {}
     for rec in records:
         s = rec["spec"]
@@ -736,9 +738,6 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         best = int(np.argmax(means))
         top = per_model[best]
 
-        def se(x: np.ndarray) -> float:
-            return float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
-
         planned = _registered_preset(preset)
         row: dict[str, Any] = {
             "env": env_id,
@@ -754,9 +753,9 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
             "seeds": [r["spec"]["seed"] for r in recs],
             "task_seed": recs[0]["spec"].get("task_seed"),
             "mean_all": float(all_tasks.mean()),
-            "se_all": se(all_tasks),
+            "se_all": standard_error(all_tasks),
             "mean_top1": float(top.mean()),
-            "se_top1": se(top),
+            "se_top1": standard_error(top),
             "top1_seed": recs[best]["spec"]["seed"],
             "iqm": interquartile_mean(all_tasks),
             "iqm_ci": list(bootstrap_iqm_ci(per_model)) if len(per_model) > 1 else None,
@@ -779,8 +778,10 @@ def _registered_preset(label: str) -> ReproducePreset | None:
     return REPRODUCE_PRESETS.get(label.split("+", 1)[0])
 
 
-def _fmt(pair: Sequence[float] | None) -> str:
-    return "-" if pair is None else f"{pair[0]:.1f} ± {pair[1]:.1f}"
+def _fmt(pair: Sequence[float | None] | None) -> str:
+    from pcc_agent.evaluation import format_mean_se
+
+    return "-" if pair is None else format_mean_se(pair[0], pair[1])
 
 
 def paper_table(row: dict[str, Any]) -> str:
@@ -1014,7 +1015,7 @@ def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
         x - 0.2,
         [r["mean_all"] for r in rows],
         0.4,
-        yerr=[r["se_all"] for r in rows],
+        yerr=[np.nan if r["se_all"] is None else r["se_all"] for r in rows],
         label="ours (all models)",
         capsize=3,
     )

@@ -40,7 +40,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
 import platform
 import sys
@@ -312,10 +311,6 @@ def make_policy_view(model: Any, env: gym.Env, observation: str) -> Any:
     return model if observation == "image" else _StatePolicy(model, env)
 
 
-def _se(x: np.ndarray) -> float:
-    return float(x.std(ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
-
-
 def oracle_point(env_id: str, task_seed_list: Sequence[int], results_dir: Path) -> dict | None:
     """The oracle's record on these tasks, run here and cached if needed (None: no oracle)."""
     from pcc_agent.evaluation import evaluate_control
@@ -352,6 +347,7 @@ def summarize(
     evaluated on exactly these tasks count, and the oracle is run on them if the
     reproduction results have none.
     """
+    from pcc_agent.evaluation import standard_error
 
     def same_tasks(record: dict[str, Any]) -> bool:
         return task_seed_list is None or record.get("task_seeds") == list(task_seed_list)
@@ -376,7 +372,7 @@ def summarize(
             {
                 "env_steps": steps,
                 "mean": float(np.mean(v)),
-                "se": _se(np.asarray(v)),
+                "se": standard_error(v),
                 "n_seeds": len(v),
             }
             for steps, v in sorted(points.items())
@@ -413,7 +409,7 @@ def summarize(
                                               "preset": "vs_sac"}
     for entry in model_based.values():
         values = np.asarray(entry.pop("percentages"))
-        entry.update(mean=float(values.mean()), se=_se(values), n_tasks=int(values.size))
+        entry.update(mean=float(values.mean()), se=standard_error(values), n_tasks=int(values.size))
     return {"env": env_id, "sac": curves, "model_based": model_based}
 
 
@@ -429,6 +425,8 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
     """JSON, Markdown table and learning-curve PNG for one env."""
     import matplotlib
 
+    from pcc_agent.evaluation import format_mean_se
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -442,13 +440,13 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
     for label, entry in sorted(summary["model_based"].items()):
         samples = "- (true dynamics)" if entry["method"] == ORACLE else entry["num_samples"]
         lines.append(
-            f"| {label} | {samples} | {entry['mean']:.1f} ± {entry['se']:.1f} "
+            f"| {label} | {samples} | {format_mean_se(entry['mean'], entry['se'])} "
             f"| {entry['n_tasks']} tasks |"
         )
     for policy, curve in summary["sac"].items():
         for p in curve:
             lines.append(
-                f"| {policy} | {p['env_steps']} | {p['mean']:.1f} ± {p['se']:.1f} "
+                f"| {policy} | {p['env_steps']} | {format_mean_se(p['mean'], p['se'])} "
                 f"| {p['n_seeds']} seeds |"
             )
     _write_text_atomic(results_dir / f"{name}.md", "\n".join(lines) + "\n")
@@ -456,7 +454,7 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
     for policy, curve in summary["sac"].items():
         x = [p["env_steps"] for p in curve]
         y = np.array([p["mean"] for p in curve])
-        e = np.array([p["se"] for p in curve])
+        e = np.array([np.nan if p["se"] is None else p["se"] for p in curve])
         ax.plot(x, y, marker="o", label=_curve_label(policy))
         ax.fill_between(x, y - e, y + e, alpha=0.2)
     model_based = sorted(summary["model_based"].items())
@@ -470,7 +468,7 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
         ax.errorbar(
             entry["num_samples"] * dodge,
             entry["mean"],
-            yerr=entry["se"],
+            yerr=np.nan if entry["se"] is None else entry["se"],
             fmt="s",
             capsize=3,
             label=f"{label}, {entry['n_tasks']} tasks",

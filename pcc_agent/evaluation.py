@@ -23,9 +23,31 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-__all__ = ["ControlEvaluation", "TaskResult", "evaluate_control", "task_seeds"]
+__all__ = [
+    "ControlEvaluation",
+    "TaskResult",
+    "evaluate_control",
+    "format_mean_se",
+    "standard_error",
+    "task_seeds",
+]
 
 PolicyLike = Any  # anything with SB3's ``predict(obs, state, episode_start, deterministic)``
+
+
+def standard_error(values: Sequence[float] | np.ndarray) -> float | None:
+    """Standard error of the mean (sample standard deviation / sqrt(n)).
+
+    ``None`` for fewer than two values: the spread of one task or one seed is undefined, and
+    printing it as 0.0 would claim a certainty the data do not have.
+    """
+    x = np.asarray(values, dtype=np.float64).ravel()
+    return float(x.std(ddof=1) / np.sqrt(x.size)) if x.size > 1 else None
+
+
+def format_mean_se(mean: float, se: float | None) -> str:
+    """``"54.3 ± 2.1"``, or ``"54.3 ± n/a"`` where the standard error is undefined."""
+    return f"{mean:.1f} ± " + ("n/a" if se is None else f"{se:.1f}")
 
 
 @dataclass
@@ -69,10 +91,9 @@ class ControlEvaluation:
         return float(self.percentages.mean()) if self.tasks else float("nan")
 
     @property
-    def standard_error(self) -> float:
-        """Standard error of the mean over tasks."""
-        n = len(self.tasks)
-        return float(self.percentages.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+    def standard_error(self) -> float | None:
+        """Standard error of the mean over tasks (``None`` for fewer than two tasks)."""
+        return standard_error(self.percentages)
 
 
 class _EpisodeRecorder:

@@ -203,6 +203,22 @@ def test_aggregate_all_and_top1():
     assert row["iqm_ci"][0] <= row["iqm"] <= row["iqm_ci"][1]
 
 
+def test_standard_error_of_one_task_is_undefined_not_zero():
+    from benchmarks.reproduce import markdown_table
+    from pcc_agent.evaluation import format_mean_se, standard_error
+
+    assert standard_error([3.0]) is None and standard_error([]) is None
+    assert np.isclose(standard_error([0.0, 10.0]), 5.0)
+    assert format_mean_se(42.0, None) == "42.0 ± n/a"
+    one_task = {"spec": {"env_id": "e", "method": "pcc", "noise_std": 0.0, "preset": "p",
+                         "seed": 0, "model_variant": "paper"},
+                "percentages": [42.0], "train_seconds": 1.0}
+    (row,) = aggregate([one_task])
+    assert row["se_all"] is None and row["se_top1"] is None
+    assert json.loads(json.dumps(row))["se_all"] is None  # null in summary.json, not NaN
+    assert "| 42.0 ± n/a |" in markdown_table([row])
+
+
 def test_interquartile_mean():
     assert interquartile_mean(np.array([0, 1, 2, 3, 4, 5, 6, 100])) == 3.5
 

@@ -130,11 +130,16 @@ def test_restarts_model_counts_the_data_of_every_training(tmp_path):
              "train_seconds": 1.0, "training": {"best_validation_loss": loss}, "spec": spec,
              "config": json.loads(json.dumps(agent.config_dict()))},
         )
-    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)["model_based"]
+    summary = vs_sac.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)
+    points = summary["model_based"]
     assert points["pcc (paper-fast-long)"]["num_samples"] == 5000
     assert points["pcc (paper-fast-long-best2)"]["num_samples"] == 10000
     assert points["pcc (paper-fast-long-best2)"]["mean"] == 70.0
     assert "pcc (paper-fast-long-best3)" not in points
+    # One task each: the standard error is undefined, and the table says so.
+    assert points["pcc (paper-fast-long)"]["se"] is None
+    vs_sac.write_outputs(summary, tmp_path)
+    assert "| 20.0 ± n/a |" in (tmp_path / "Planar-v0.md").read_text()
 
 
 def test_model_based_points_on_other_tasks_are_left_out(tmp_path):
