@@ -10,8 +10,10 @@ over all methods. It also reports how well each model's code determines every tr
 coordinate (:func:`pcc_agent.diagnostics.state_decodability`, k-NN R^2), which shows e.g. a
 cart-pole code without velocities, and how each model's dynamics behave at the goal
 (:func:`pcc_agent.diagnostics.goal_linearization`: the goal code's one-step drift and the
-spectral radius there, beside the true dynamics' at the goal state). Nothing is retrained and
-no control task is rerun.
+spectral radius there, beside the true dynamics' at the goal state), and how far the
+planner's cost, the latent distance to the goal, climbs on the straight way from each task's
+start to the goal (:func:`pcc_agent.diagnostics.goal_path_barrier`, the mean over the run's
+tasks). Nothing is retrained and no control task is rerun.
 
 Usage:
     python -m benchmarks.latent_diagnostics --results-dir benchmarks/results/reproduce \
@@ -22,6 +24,7 @@ Usage:
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -44,7 +47,7 @@ HELD_OUT_SEED = 1_000_000
 #: Fewest held-out transitions: the k-NN state R^2 uses 2/3 as references (k = 10) and 1/3.
 MIN_SAMPLES = 30
 DIAGNOSTICS = ("consistency_error", "curvature", "latent_scale", "best_validation_loss",
-               "min_state_r2", "goal_drift", "goal_spectral_radius")
+               "min_state_r2", "goal_drift", "goal_spectral_radius", "goal_path_barrier")
 
 
 def spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
@@ -75,50 +78,70 @@ def diagnose_runs(
     import gymnasium as gym
     import torch
 
-    from pcc_agent.agent import PCCAgent
-    from pcc_agent.diagnostics import goal_linearization, latent_diagnostics, state_decodability
-    from pcc_envs.data import collect_transitions
-
     torch.set_num_threads(1)
-    held_out: dict[float, Any] = {}
-    rows = []
     env = gym.make(env_id)
     try:
-        state_error = env.unwrapped.state_error
+        rows = [row for record in load_records(results_dir)
+                if (row := _diagnose_run(results_dir, env_id, preset, num_samples, record, env))]
     finally:
         env.close()
-    for record in load_records(results_dir):
-        spec = RunSpec(**record["spec"])
-        if (spec.method == ORACLE or spec.env_id != env_id or spec.preset != preset
-                or is_restart_training(record["spec"])):  # the grid's models 0 .. N-1 only
-            continue
-        agent_file = checkpoint_path(results_dir, spec)
-        if not agent_file.exists():
-            print(f"No saved agent for {spec.method} seed {spec.seed} ({agent_file}); skipped.")
-            continue
-        if spec.noise_std not in held_out:
-            held_out[spec.noise_std] = collect_transitions(
-                env_id, num_samples, HELD_OUT_SEED, noise_std=spec.noise_std)
-        data = held_out[spec.noise_std]
-        agent = PCCAgent.load(agent_file, device="cpu")
-        found = latent_diagnostics(agent.model, data.obs, data.action, data.next_obs)
-        state_r2 = state_decodability(agent.model, data.obs, data.state, state_error)
-        at_goal = goal_linearization(agent.model, agent.goal_observation, found.latent_scale)
-        rows.append({
-            "env": env_id, "preset": preset, "method": spec.method, "seed": spec.seed,
-            "noise_std": spec.noise_std, "percent_in_goal": float(record["mean"]),
-            "best_validation_loss": record.get("training", {}).get("best_validation_loss"),
-            **found.to_dict(),
-            "state_r2": [round(float(v), 4) for v in state_r2],
-            "min_state_r2": float(state_r2.min()),
-            "goal_drift": at_goal.drift,
-            "goal_spectral_radius": at_goal.spectral_radius,
-        })
-        print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
-              f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
-              f"R^2 {np.round(state_r2, 2).tolist()}, at the goal: drift {at_goal.drift:.3f}, "
-              f"spectral radius {at_goal.spectral_radius:.3f}", flush=True)
     return sorted(rows, key=lambda r: (r["method"], r["noise_std"], r["seed"]))
+
+
+def _diagnose_run(
+    results_dir: Path, env_id: str, preset: str, num_samples: int, record: dict[str, Any],
+    env: Any,
+) -> dict[str, Any] | None:
+    """The diagnostics row of one run record, or None if it is not a model of the grid."""
+    from pcc_agent.agent import PCCAgent
+    from pcc_agent.diagnostics import (
+        goal_linearization,
+        goal_path_barrier,
+        latent_diagnostics,
+        state_decodability,
+    )
+
+    spec = RunSpec(**record["spec"])
+    if (spec.method == ORACLE or spec.env_id != env_id or spec.preset != preset
+            or is_restart_training(record["spec"])):  # the grid's models 0 .. N-1 only
+        return None
+    agent_file = checkpoint_path(results_dir, spec)
+    if not agent_file.exists():
+        print(f"No saved agent for {spec.method} seed {spec.seed} ({agent_file}); skipped.")
+        return None
+    data = _held_out_transitions(env_id, num_samples, spec.noise_std)
+    agent = PCCAgent.load(agent_file, device="cpu")
+    found = latent_diagnostics(agent.model, data.obs, data.action, data.next_obs)
+    state_r2 = state_decodability(agent.model, data.obs, data.state, env.unwrapped.state_error)
+    at_goal = goal_linearization(agent.model, agent.goal_observation, found.latent_scale)
+    starts = [task["states"][0] for task in record.get("tasks", []) if task.get("states")]
+    barrier = (float(np.mean([
+        goal_path_barrier(agent.model, env, start, agent.goal_observation, found.latent_scale)
+        for start in starts])) if starts else None)
+    print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
+          f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
+          f"R^2 {np.round(state_r2, 2).tolist()}, at the goal: drift {at_goal.drift:.3f}, "
+          f"spectral radius {at_goal.spectral_radius:.3f}, goal path barrier "
+          f"{'-' if barrier is None else f'{barrier:.2f}'}", flush=True)
+    return {
+        "env": env_id, "preset": preset, "method": spec.method, "seed": spec.seed,
+        "noise_std": spec.noise_std, "percent_in_goal": float(record["mean"]),
+        "best_validation_loss": record.get("training", {}).get("best_validation_loss"),
+        **found.to_dict(),
+        "state_r2": [round(float(v), 4) for v in state_r2],
+        "min_state_r2": float(state_r2.min()),
+        "goal_drift": at_goal.drift,
+        "goal_spectral_radius": at_goal.spectral_radius,
+        "goal_path_barrier": barrier,
+    }
+
+
+@functools.lru_cache(maxsize=4)
+def _held_out_transitions(env_id: str, num_samples: int, noise_std: float) -> Any:
+    """The held-out transitions of one noise level, shared by every model."""
+    from pcc_envs.data import collect_transitions
+
+    return collect_transitions(env_id, num_samples, HELD_OUT_SEED, noise_std=noise_std)
 
 
 def true_goal_linearization_of(env_id: str) -> dict[str, Any] | None:
@@ -164,20 +187,26 @@ def markdown(
     lines = [
         "| method | seed | % in goal | consistency error | curvature | latent scale "
         "| best val. loss | state R^2 (k-NN, per coordinate) | goal drift "
-        "| goal spectral radius |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| goal spectral radius | goal path barrier |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         val = "-" if r["best_validation_loss"] is None else f"{r['best_validation_loss']:.1f}"
+        barrier = ("-" if r.get("goal_path_barrier") is None
+                   else f"{r['goal_path_barrier']:.2f}")
         lines.append(
             f"| {r['method']} | {r['seed']} | {r['percent_in_goal']:.1f} "
             f"| {r['consistency_error']:.4f} | {r['curvature']:.2e} | {r['latent_scale']:.2f} "
             f"| {val} | {', '.join(f'{v:.2f}' for v in r['state_r2'])} "
-            f"| {r['goal_drift']:.3f} | {r['goal_spectral_radius']:.3f} |"
+            f"| {r['goal_drift']:.3f} | {r['goal_spectral_radius']:.3f} "
+            f"| {barrier} |"
         )
     lines += ["", "Goal drift: one step with no action from the goal's code, in units of the "
               "latent scale. Goal spectral radius: the largest eigenvalue modulus of the "
-              "latent dynamics linearized there (above 1: unstable)."]
+              "latent dynamics linearized there (above 1: unstable). Goal path barrier: how "
+              "far the latent distance to the goal climbs on the straight state path from a "
+              "task's start to the goal, in units of the latent scale (mean over tasks; 0: "
+              "it falls all the way)."]
     if true_goal is not None:
         lines[-1] += (f" The true dynamics at the goal state: spectral radius "
                       f"{true_goal['spectral_radius']:.3f}, eigenvalue moduli "

@@ -27,6 +27,11 @@ holds the goal only if they reproduce that. :func:`goal_linearization` linearize
 dynamics at the goal's code with no action; :func:`true_goal_linearization` does the same for
 the env's true dynamics, for comparison.
 
+The planner's cost is the squared latent distance to the goal's code, looked at over a short
+window. :func:`goal_path_barrier` measures how far that distance climbs along the straight
+state-space path from a task's start to the goal: where it climbs, the start looks like a
+local minimum to a short window, even when every other diagnostic is good.
+
 On Planar (``benchmarks/latent_diagnostics.py``, docs/training.md) the consistency error
 tells the models that control well from those that do not.
 """
@@ -48,7 +53,9 @@ __all__ = [
     "GoalLinearization",
     "LatentDiagnostics",
     "goal_linearization",
+    "goal_path_barrier",
     "knn_decodability",
+    "largest_climb",
     "latent_diagnostics",
     "state_decodability",
     "true_goal_linearization",
@@ -346,3 +353,61 @@ def true_goal_linearization(env: Any, fd_step: float = 1e-5) -> GoalLinearizatio
     moved = base.state_error(dynamics.step(goal, still).numpy(), goal.numpy())
     A, B = dynamics.jacobians(goal, still)  # noqa: N806
     return _linearization(float(np.linalg.norm(moved)), A[0].numpy(), B[0].numpy())
+
+
+def largest_climb(values: Any) -> float:
+    """The largest rise of a sequence above its running minimum (0 if it never rises)."""
+    x = np.asarray(values, dtype=np.float64).ravel()
+    return float((x - np.minimum.accumulate(x)).max()) if x.size else 0.0
+
+
+def goal_path_barrier(
+    model: EmbeddingModel,
+    env: Any,
+    start_state: np.ndarray,
+    goal_obs: np.ndarray,
+    scale: float = 1.0,
+    num_points: int = 41,
+) -> float:
+    """How far the latent distance to the goal climbs on the way from a start to the goal.
+
+    The states ``s(a) = start + a * state_error(goal_state, start)``, ``a`` in ``[0, 1]``,
+    form the straight path in state space (angles the short way round; all coordinates,
+    velocities included, interpolated). They are rendered with the env's
+    ``observations_of`` and encoded; the result is :func:`largest_climb` of
+    ``|| mu(x(s(a))) - mu(goal_obs) ||`` over the path, divided by ``scale``. 0 means the
+    planner's cost falls all the way to the goal; a value near 1 means a latent-scale-sized
+    hill between the start and the goal, which a short planning window does not see past.
+
+    Args:
+        model: A trained embedding model.
+        env: A ``pcc_envs`` environment (``goal_state``, ``state_error``, ``observations_of``
+            on it or on ``env.unwrapped``).
+        start_state: The task's start state ``(d,)``.
+        goal_obs: The goal observation the planner steers to (``agent.goal_observation``).
+        scale: Divides the result (e.g. :attr:`LatentDiagnostics.latent_scale`).
+        num_points: States on the path, both ends included.
+
+    Returns:
+        The barrier height in units of ``scale``.
+    """
+    core = getattr(env, "unwrapped", env)
+    if not all(hasattr(core, name) for name in ("goal_state", "state_error",
+                                                "observations_of")):
+        raise ValueError("goal_path_barrier needs a pcc_envs environment (goal_state, "
+                         "state_error and observations_of).")
+    if num_points < 2:
+        raise ValueError(f"num_points must be at least 2, got {num_points}.")
+    start = np.asarray(start_state, dtype=np.float64)
+    if start.shape != core.goal_state.shape:
+        raise ValueError(f"The start state has shape {start.shape}, the env's states "
+                         f"{core.goal_state.shape}.")
+    step = core.state_error(core.goal_state[None], start[None])[0]
+    path = start + np.linspace(0.0, 1.0, num_points)[:, None] * step
+    observations = np.asarray(core.observations_of(path), dtype=np.uint8)
+    device = next(model.parameters()).device
+    with _eval_mode(model), torch.no_grad():
+        codes = model.encode(torch.as_tensor(observations, device=device))[0]
+        goal = model.encode(torch.as_tensor(np.asarray(goal_obs)[None], device=device))[0]
+    distances = (codes - goal).norm(dim=-1).cpu().numpy()
+    return largest_climb(distances) / scale

@@ -12,7 +12,9 @@ import torch
 from benchmarks import latent_diagnostics as cli
 from pcc_agent.diagnostics import (
     goal_linearization,
+    goal_path_barrier,
     knn_decodability,
+    largest_climb,
     latent_diagnostics,
     state_decodability,
     true_goal_linearization,
@@ -135,6 +137,47 @@ def test_true_goal_linearization_of_the_upright_cart_pole():
                                                         rel=1e-5)
 
 
+def test_largest_climb_is_the_rise_above_the_running_minimum():
+    assert largest_climb([5.0, 4.0, 6.0, 3.0, 0.0]) == 2.0
+    assert largest_climb([3.0, 2.0, 2.0, 0.0]) == 0.0  # falls all the way: no barrier
+    assert largest_climb([1.0, 4.0, 2.0, 5.0]) == 4.0
+    assert largest_climb([]) == 0.0
+
+
+@pytest.mark.parametrize("start_angle", [3.0, 3.5, -3.5])
+def test_goal_path_barrier_walks_the_short_way_to_the_goal(start_angle, monkeypatch):
+    """The path runs from the start to the goal state with the angle wrapped, and the barrier
+    is the climb of the latent distance to the goal's code along it."""
+    env = gym.make("pcc/PendulumSwingUp-v0")
+    core = env.unwrapped
+    model = EmbeddingModel((2, 48, 48), 1, get_preset("pcc/PendulumSwingUp-v0").model, seed=0)
+    goal_obs = core.goal_observation()
+    rendered = []
+    real = core.observations_of
+
+    def record_path(states):
+        rendered.append(np.array(states))
+        return real(states)
+
+    monkeypatch.setattr(core, "observations_of", record_path)
+    start = np.array([start_angle, 0.5])
+    barrier = goal_path_barrier(model, env, start, goal_obs, scale=2.0, num_points=11)
+    (path,) = rendered
+    assert path.shape == (11, 2)
+    np.testing.assert_allclose(path[0], start)
+    np.testing.assert_allclose(core.state_error(path[-1:])[0], 0.0, atol=1e-12)
+    assert np.all(np.abs(np.diff(path[:, 0])) < 0.31)  # the short way: never across the bottom
+    with torch.no_grad():
+        codes = model.encode(torch.as_tensor(real(path)))[0]
+        goal = model.encode(torch.as_tensor(goal_obs[None]))[0]
+    distances = (codes - goal).norm(dim=-1).numpy()
+    assert barrier == pytest.approx(largest_climb(distances) / 2.0, rel=1e-5)
+    assert barrier >= 0.0
+    with pytest.raises(ValueError, match="start state has shape"):
+        goal_path_barrier(model, env, np.zeros(3), goal_obs)
+    env.close()
+
+
 def test_spearman_matches_known_values():
     assert cli.spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
     assert cli.spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
@@ -159,7 +202,7 @@ def test_cli_on_a_tiny_grid(tmp_path):
     assert result["spearman"]["pcc"]["n_models"] == 3
     assert "--preset tiny" in result["command"]
     text = out.with_name(out.name + ".md").read_text()
-    assert "| pcc | 2 |" in text
+    assert "| pcc | 2 |" in text and "goal path barrier |" in text
     # Planar's true dynamics are x + u: every eigenvalue is 1.
     assert "The true dynamics at the goal state: spectral radius 1.000" in text
     assert result["true_goal_linearization"]["eigenvalue_moduli"] == pytest.approx([1.0, 1.0])
@@ -167,6 +210,7 @@ def test_cli_on_a_tiny_grid(tmp_path):
         assert len(row["state_r2"]) == 2
         assert row["min_state_r2"] == pytest.approx(min(row["state_r2"]), abs=1e-4)
         assert row["goal_drift"] >= 0 and row["goal_spectral_radius"] > 0
+        assert row["goal_path_barrier"] is not None and row["goal_path_barrier"] >= 0
     with pytest.raises(SystemExit, match="at least 30"):
         cli.main(["--results-dir", str(tmp_path), "--preset", "tiny", "--samples", "20",
                   "--output", str(out)])
