@@ -78,6 +78,8 @@ def diagnose_runs(
     import gymnasium as gym
     import torch
 
+    import pcc_envs  # noqa: F401  (registers the pcc/ envs)
+
     torch.set_num_threads(1)
     env = gym.make(env_id)
     try:
