@@ -116,7 +116,7 @@ def _diagnose_run(
     found = latent_diagnostics(agent.model, data.obs, data.action, data.next_obs)
     state_r2 = state_decodability(agent.model, data.obs, data.state, env.unwrapped.state_error)
     at_goal = goal_linearization(agent.model, agent.goal_observation, found.latent_scale)
-    starts = [task["states"][0] for task in record.get("tasks", []) if task.get("states")]
+    starts = [_task_start(env, seed) for seed in record.get("task_seeds", [])]
     barrier = (float(np.mean([
         goal_path_barrier(agent.model, env, start, agent.goal_observation, found.latent_scale)
         for start in starts])) if starts else None)
@@ -136,6 +136,12 @@ def _diagnose_run(
         "goal_spectral_radius": at_goal.spectral_radius,
         "goal_path_barrier": barrier,
     }
+
+
+def _task_start(env: Any, task_seed: int) -> np.ndarray:
+    """The true start state of the control task with this seed (the env's reset)."""
+    env.reset(seed=int(task_seed))
+    return np.array(env.unwrapped.state, dtype=np.float64)
 
 
 @functools.lru_cache(maxsize=4)

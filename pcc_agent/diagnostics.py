@@ -371,13 +371,15 @@ def goal_path_barrier(
 ) -> float:
     """How far the latent distance to the goal climbs on the way from a start to the goal.
 
-    The states ``s(a) = start + a * state_error(goal_state, start)``, ``a`` in ``[0, 1]``,
-    form the straight path in state space (angles the short way round; all coordinates,
-    velocities included, interpolated). They are rendered with the env's
-    ``observations_of`` and encoded; the result is :func:`largest_climb` of
-    ``|| mu(x(s(a))) - mu(goal_obs) ||`` over the path, divided by ``scale``. 0 means the
-    planner's cost falls all the way to the goal; a value near 1 means a latent-scale-sized
-    hill between the start and the goal, which a short planning window does not see past.
+    The states ``s(a) = start + a * d``, ``a`` in ``[0, 1]``, form a straight path in state
+    space from the start to the goal (all coordinates, velocities included, interpolated).
+    ``d`` is ``state_error(goal_state, start)``; an angular coordinate (one the env's
+    ``state_error`` wraps) can also go the other way round, and every combination of ways
+    is tried. Each path is rendered with the env's ``observations_of`` and encoded; its
+    barrier is :func:`largest_climb` of ``|| mu(x(s(a))) - mu(goal_obs) ||`` along it. The
+    result is the lowest barrier of the paths, divided by ``scale``: 0 means the planner's
+    cost falls all the way to the goal on some path; a value near 1 means a hill of the
+    latent scale's size on every one, which a short planning window does not see past.
 
     Args:
         model: A trained embedding model.
@@ -386,7 +388,7 @@ def goal_path_barrier(
         start_state: The task's start state ``(d,)``.
         goal_obs: The goal observation the planner steers to (``agent.goal_observation``).
         scale: Divides the result (e.g. :attr:`LatentDiagnostics.latent_scale`).
-        num_points: States on the path, both ends included.
+        num_points: States on each path, both ends included.
 
     Returns:
         The barrier height in units of ``scale``.
@@ -398,16 +400,25 @@ def goal_path_barrier(
                          "state_error and observations_of).")
     if num_points < 2:
         raise ValueError(f"num_points must be at least 2, got {num_points}.")
+    goal_state = np.asarray(core.goal_state, dtype=np.float64)
     start = np.asarray(start_state, dtype=np.float64)
-    if start.shape != core.goal_state.shape:
+    if start.shape != goal_state.shape:
         raise ValueError(f"The start state has shape {start.shape}, the env's states "
-                         f"{core.goal_state.shape}.")
-    step = core.state_error(core.goal_state[None], start[None])[0]
-    path = start + np.linspace(0.0, 1.0, num_points)[:, None] * step
-    observations = np.asarray(core.observations_of(path), dtype=np.uint8)
+                         f"{goal_state.shape}.")
+    short_way = core.state_error(goal_state[None], start[None])[0]
+    turns = 2.0 * np.pi * np.eye(goal_state.size)
+    angular = np.abs(np.diagonal(core.state_error(goal_state[None] + turns, goal_state[None])))
+    ways = [short_way]
+    for i in np.flatnonzero(angular < 1e-9):  # the other way round each angle
+        turn = np.zeros_like(short_way)
+        turn[i] = -2.0 * np.pi * np.sign(short_way[i]) if short_way[i] else 2.0 * np.pi
+        ways += [way + turn for way in ways]
+    fractions = np.linspace(0.0, 1.0, num_points)[:, None]
+    paths = np.concatenate([start + fractions * way for way in ways])
+    observations = np.asarray(core.observations_of(paths), dtype=np.uint8)
     device = next(model.parameters()).device
     with _eval_mode(model), torch.no_grad():
         codes = model.encode(torch.as_tensor(observations, device=device))[0]
         goal = model.encode(torch.as_tensor(np.asarray(goal_obs)[None], device=device))[0]
-    distances = (codes - goal).norm(dim=-1).cpu().numpy()
-    return largest_climb(distances) / scale
+    distances = (codes - goal).norm(dim=-1).cpu().numpy().reshape(len(ways), num_points)
+    return min(largest_climb(path) for path in distances) / scale

@@ -144,10 +144,10 @@ def test_largest_climb_is_the_rise_above_the_running_minimum():
     assert largest_climb([]) == 0.0
 
 
-@pytest.mark.parametrize("start_angle", [3.0, 3.5, -3.5])
-def test_goal_path_barrier_walks_the_short_way_to_the_goal(start_angle, monkeypatch):
-    """The path runs from the start to the goal state with the angle wrapped, and the barrier
-    is the climb of the latent distance to the goal's code along it."""
+@pytest.mark.parametrize("start_angle", [3.0, 3.5, -np.pi])
+def test_goal_path_barrier_tries_both_ways_round_to_the_goal(start_angle, monkeypatch):
+    """Two straight paths from the start to the goal state, one each way round the angle;
+    the barrier is the lower climb of the latent distance to the goal's code along them."""
     env = gym.make("pcc/PendulumSwingUp-v0")
     core = env.unwrapped
     model = EmbeddingModel((2, 48, 48), 1, get_preset("pcc/PendulumSwingUp-v0").model, seed=0)
@@ -155,26 +155,45 @@ def test_goal_path_barrier_walks_the_short_way_to_the_goal(start_angle, monkeypa
     rendered = []
     real = core.observations_of
 
-    def record_path(states):
+    def record_paths(states):
         rendered.append(np.array(states))
         return real(states)
 
-    monkeypatch.setattr(core, "observations_of", record_path)
+    monkeypatch.setattr(core, "observations_of", record_paths)
     start = np.array([start_angle, 0.5])
     barrier = goal_path_barrier(model, env, start, goal_obs, scale=2.0, num_points=11)
-    (path,) = rendered
-    assert path.shape == (11, 2)
-    np.testing.assert_allclose(path[0], start)
-    np.testing.assert_allclose(core.state_error(path[-1:])[0], 0.0, atol=1e-12)
-    assert np.all(np.abs(np.diff(path[:, 0])) < 0.31)  # the short way: never across the bottom
+    (states,) = rendered
+    paths = states.reshape(2, 11, 2)
+    steps = np.diff(paths[:, :, 0], axis=1)
+    assert {np.sign(steps[0, 0]), np.sign(steps[1, 0])} == {-1.0, 1.0}  # both ways round
+    for path, step in zip(paths, steps):
+        np.testing.assert_allclose(path[0], start)
+        np.testing.assert_allclose(core.state_error(path[-1:])[0], 0.0, atol=1e-12)
+        np.testing.assert_allclose(path[:, 1], np.linspace(0.5, 0.0, 11))  # rate to rest
+        assert np.allclose(step, step[0])  # straight
+    # the short way first: at most half a turn
+    assert abs(paths[0, -1, 0] - start_angle) <= np.pi + 1e-12
     with torch.no_grad():
-        codes = model.encode(torch.as_tensor(real(path)))[0]
+        codes = model.encode(torch.as_tensor(real(states)))[0]
         goal = model.encode(torch.as_tensor(goal_obs[None]))[0]
-    distances = (codes - goal).norm(dim=-1).numpy()
-    assert barrier == pytest.approx(largest_climb(distances) / 2.0, rel=1e-5)
-    assert barrier >= 0.0
+    distances = (codes - goal).norm(dim=-1).numpy().reshape(2, 11)
+    assert barrier == pytest.approx(min(map(largest_climb, distances)) / 2.0, rel=1e-5)
     with pytest.raises(ValueError, match="start state has shape"):
         goal_path_barrier(model, env, np.zeros(3), goal_obs)
+    env.close()
+
+
+def test_goal_path_barrier_of_an_env_without_angles_has_one_path(monkeypatch):
+    env = gym.make("pcc/Planar-v0")
+    core = env.unwrapped
+    goal_obs = core.goal_observation()
+    rendered = []
+    real = core.observations_of
+    monkeypatch.setattr(core, "observations_of", lambda s: rendered.append(s) or real(s))
+    barrier = goal_path_barrier(planar_model(), env, np.array([3.0, 3.0]), goal_obs,
+                                num_points=5)
+    np.testing.assert_allclose(rendered[0], np.linspace([3.0, 3.0], core.goal_state, 5))
+    assert barrier >= 0.0
     env.close()
 
 
