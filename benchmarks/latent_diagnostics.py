@@ -117,9 +117,13 @@ def _diagnose_run(
     state_r2 = state_decodability(agent.model, data.obs, data.state, env.unwrapped.state_error)
     at_goal = goal_linearization(agent.model, agent.goal_observation, found.latent_scale)
     starts = [_task_start(env, seed) for seed in record.get("task_seeds", [])]
-    barrier = (float(np.mean([
-        goal_path_barrier(agent.model, env, start, agent.goal_observation, found.latent_scale)
-        for start in starts])) if starts else None)
+    barrier = None
+    if starts:  # tasks often share their start (Pendulum: all 10): one path per distinct one
+        distinct, counts = np.unique(np.array(starts), axis=0, return_counts=True)
+        barrier = float(np.average([
+            goal_path_barrier(agent.model, env, start, agent.goal_observation,
+                              found.latent_scale)
+            for start in distinct], weights=counts))
     print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
           f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
           f"R^2 {np.round(state_r2, 2).tolist()}, at the goal: drift {at_goal.drift:.3f}, "
