@@ -13,7 +13,9 @@ cart-pole code without velocities, and how each model's dynamics behave at the g
 spectral radius there, beside the true dynamics' at the goal state), and how far the
 planner's cost, the latent distance to the goal, climbs on the straight way from each task's
 start to the goal (:func:`pcc_agent.diagnostics.goal_path_barrier`, the mean over the run's
-tasks). Nothing is retrained and no control task is rerun.
+tasks), and whether the held-out states coded nearest the goal are near it in state space
+(:func:`pcc_agent.diagnostics.goal_aliasing`: near 0 if so, near 1 or above for a fold that
+puts a distant state there). Nothing is retrained and no control task is rerun.
 
 Usage:
     python -m benchmarks.latent_diagnostics --results-dir benchmarks/results/reproduce \
@@ -47,7 +49,8 @@ HELD_OUT_SEED = 1_000_000
 #: Fewest held-out transitions: the k-NN state R^2 uses 2/3 as references (k = 10) and 1/3.
 MIN_SAMPLES = 30
 DIAGNOSTICS = ("consistency_error", "curvature", "latent_scale", "best_validation_loss",
-               "min_state_r2", "goal_drift", "goal_spectral_radius", "goal_path_barrier")
+               "min_state_r2", "goal_drift", "goal_spectral_radius", "goal_path_barrier",
+               "goal_aliasing")
 
 
 def spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
@@ -97,6 +100,7 @@ def _diagnose_run(
     """The diagnostics row of one run record, or None if it is not a model of the grid."""
     from pcc_agent.agent import PCCAgent
     from pcc_agent.diagnostics import (
+        goal_aliasing,
         goal_linearization,
         goal_path_barrier,
         latent_diagnostics,
@@ -116,6 +120,8 @@ def _diagnose_run(
     found = latent_diagnostics(agent.model, data.obs, data.action, data.next_obs)
     state_r2 = state_decodability(agent.model, data.obs, data.state, env.unwrapped.state_error)
     at_goal = goal_linearization(agent.model, agent.goal_observation, found.latent_scale)
+    aliasing = goal_aliasing(agent.model, data.obs, data.state, agent.goal_observation,
+                             env.unwrapped.goal_state, env.unwrapped.state_error)
     starts = [_task_start(env, seed) for seed in record.get("task_seeds", [])]
     barrier = None
     if starts:  # tasks often share their start (Pendulum: all 10): one path per distinct one
@@ -128,7 +134,8 @@ def _diagnose_run(
           f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
           f"R^2 {np.round(state_r2, 2).tolist()}, at the goal: drift {at_goal.drift:.3f}, "
           f"spectral radius {at_goal.spectral_radius:.3f}, goal path barrier "
-          f"{'-' if barrier is None else f'{barrier:.2f}'}", flush=True)
+          f"{'-' if barrier is None else f'{barrier:.2f}'}, goal aliasing {aliasing:.2f}",
+          flush=True)
     return {
         "env": env_id, "preset": preset, "method": spec.method, "seed": spec.seed,
         "noise_std": spec.noise_std, "percent_in_goal": float(record["mean"]),
@@ -139,6 +146,7 @@ def _diagnose_run(
         "goal_drift": at_goal.drift,
         "goal_spectral_radius": at_goal.spectral_radius,
         "goal_path_barrier": barrier,
+        "goal_aliasing": aliasing,
     }
 
 
@@ -199,26 +207,29 @@ def markdown(
     lines = [
         "| method | seed | % in goal | consistency error | curvature | latent scale "
         "| best val. loss | state R^2 (k-NN, per coordinate) | goal drift "
-        "| goal spectral radius | goal path barrier |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| goal spectral radius | goal path barrier | goal aliasing |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         val = "-" if r["best_validation_loss"] is None else f"{r['best_validation_loss']:.1f}"
-        barrier = ("-" if r.get("goal_path_barrier") is None
-                   else f"{r['goal_path_barrier']:.2f}")
+        barrier, aliasing = ("-" if r.get(key) is None else f"{r[key]:.2f}"
+                             for key in ("goal_path_barrier", "goal_aliasing"))
         lines.append(
             f"| {r['method']} | {r['seed']} | {r['percent_in_goal']:.1f} "
             f"| {r['consistency_error']:.4f} | {r['curvature']:.2e} | {r['latent_scale']:.2f} "
             f"| {val} | {', '.join(f'{v:.2f}' for v in r['state_r2'])} "
             f"| {r['goal_drift']:.3f} | {r['goal_spectral_radius']:.3f} "
-            f"| {barrier} |"
+            f"| {barrier} | {aliasing} |"
         )
     lines += ["", "Goal drift: one step with no action from the goal's code, in units of the "
               "latent scale. Goal spectral radius: the largest eigenvalue modulus of the "
               "latent dynamics linearized there (above 1: unstable). Goal path barrier: how "
               "far the latent distance to the goal climbs on the straight state path from a "
               "task's start to the goal, in units of the latent scale (mean over tasks; 0: "
-              "it falls all the way)."]
+              "it falls all the way). Goal aliasing: the largest state distance from the goal "
+              "of the 10 held-out states coded nearest the goal, over the median of all "
+              "held-out states (near 0: the goal's latent neighbours are its state "
+              "neighbours; near 1 or above: a fold puts a distant state there)."]
     if true_goal is not None:
         lines[-1] += (f" The true dynamics at the goal state: spectral radius "
                       f"{true_goal['spectral_radius']:.3f}, eigenvalue moduli "

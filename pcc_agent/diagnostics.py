@@ -31,6 +31,8 @@ The planner's cost is the squared latent distance to the goal's code, looked at 
 window. :func:`goal_path_barrier` measures how far that distance climbs along the straight
 state-space path from a task's start to the goal: where it climbs, the start looks like a
 local minimum to a short window, even when every other diagnostic is good.
+:func:`goal_aliasing` asks whether the states coded nearest the goal's code are near the goal
+at all: where the latent map folds, a distant state shares the goal's low cost.
 
 On Planar (``benchmarks/latent_diagnostics.py``, docs/training.md) the consistency error
 tells the models that control well from those that do not.
@@ -245,6 +247,12 @@ def state_decodability(
     Returns:
         ``(d,)`` R^2 per state coordinate (1: determined by the code; 0: absent from it).
     """
+    return knn_decodability(_encoder_means(model, obs, batch_size), states, state_error,
+                            neighbours)
+
+
+def _encoder_means(model: EmbeddingModel, obs: np.ndarray, batch_size: int = 500) -> np.ndarray:
+    """The encoder means of ``obs`` ``(N, *obs_shape)`` as a ``(N, n_z)`` float64 array."""
     if tuple(obs.shape[1:]) != model.obs_shape:
         raise ValueError(f"Observations have shape {obs.shape[1:]}, the model expects "
                          f"{model.obs_shape}.")
@@ -252,7 +260,57 @@ def state_decodability(
     with _eval_mode(model), torch.no_grad():
         codes = [model.encode(torch.as_tensor(obs[i:i + batch_size], device=device))[0].cpu()
                  for i in range(0, len(obs), batch_size)]
-    return knn_decodability(torch.cat(codes).numpy(), states, state_error, neighbours)
+    return torch.cat(codes).numpy().astype(np.float64)
+
+
+def goal_aliasing(
+    model: EmbeddingModel,
+    obs: np.ndarray,
+    states: np.ndarray,
+    goal_obs: np.ndarray,
+    goal_state: np.ndarray,
+    state_error: StateError | None = None,
+    neighbours: int = 10,
+    batch_size: int = 500,
+) -> float:
+    """How far from the goal, in state space, lie the states whose codes are nearest the goal's.
+
+    The planner steers to the goal's code. If the encoder maps some distant states next to it
+    (a fold of the latent map), the planner can settle there: the latent cost is as low as at
+    the goal. This takes the ``neighbours`` observations whose encoder means are nearest the
+    goal observation's, and returns the largest distance of their true states from the goal
+    state, divided by the median distance of all ``states`` from it: near 0 when all the
+    goal's latent neighbours are its state neighbours, near 1 or above when one of them is as
+    far as a typical state (a fold). Distances are Euclidean norms of
+    ``state_error(state, goal_state)``.
+
+    Args:
+        model: A trained embedding model.
+        obs: Observations ``uint8 (N, *obs_shape)``, e.g. held-out uniform samples.
+        states: The true states ``(N, d)`` behind them.
+        goal_obs: The goal observation the planner steers to (``agent.goal_observation``).
+        goal_state: The env's goal state ``(d,)``.
+        state_error: The env's ``state_error`` (wraps angles); default plain subtraction.
+        neighbours: How many latent neighbours of the goal to look at.
+        batch_size: Observations per forward pass.
+
+    Returns:
+        The aliasing ratio, at least 0.
+    """
+    states = np.asarray(states, dtype=np.float64)
+    goal_state = np.asarray(goal_state, dtype=np.float64)
+    if states.ndim != 2 or len(states) != len(obs) or states.shape[1:] != goal_state.shape:
+        raise ValueError(f"Need states (N, d) for the N={len(obs)} observations and a goal "
+                         f"state (d,), got shapes {states.shape} and {goal_state.shape}.")
+    if not 1 <= neighbours <= len(obs):
+        raise ValueError(f"neighbours must be between 1 and the {len(obs)} observations, got "
+                         f"{neighbours}.")
+    codes = _encoder_means(model, obs, batch_size)
+    goal_code = _encoder_means(model, np.asarray(goal_obs)[None], batch_size)[0]
+    nearest = np.argsort(np.linalg.norm(codes - goal_code, axis=1), kind="stable")[:neighbours]
+    error = state_error or _subtract
+    from_goal = np.linalg.norm(error(states, np.broadcast_to(goal_state, states.shape)), axis=1)
+    return float(from_goal[nearest].max() / max(float(np.median(from_goal)), 1e-300))
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,9 @@ import pytest
 import torch
 
 from benchmarks import latent_diagnostics as cli
+from pcc_agent import diagnostics
 from pcc_agent.diagnostics import (
+    goal_aliasing,
     goal_linearization,
     goal_path_barrier,
     knn_decodability,
@@ -197,6 +199,37 @@ def test_goal_path_barrier_of_an_env_without_angles_has_one_path(monkeypatch):
     env.close()
 
 
+def test_goal_aliasing_is_small_for_a_faithful_code_and_near_one_for_a_fold(monkeypatch):
+    """The states coded nearest the goal: its state neighbours under a code that is the state,
+    the far side of the room under a code that folds the room onto itself."""
+    rng = np.random.default_rng(0)
+    states = rng.uniform(0.0, 40.0, size=(2000, 2))
+    goal = np.array([37.0, 37.0])
+    obs = np.zeros((len(states), 1, 40, 40), dtype=np.uint8)  # stand-ins: the codes are patched
+    goal_obs = np.ones((1, 40, 40), dtype=np.uint8)
+    model = planar_model()
+
+    def codes_of(code_of_state):
+        def encoder_means(model, observations, batch_size=500):
+            return np.array([goal]) if observations[0].any() else code_of_state(states)
+        return encoder_means
+
+    monkeypatch.setattr(diagnostics, "_encoder_means", codes_of(lambda s: s))
+    faithful = goal_aliasing(model, obs, states, goal_obs, goal)
+    # a fold: the code of (x, y) is that of (40 - x, 40 - y) too, so (3, 3) sits by the goal
+    monkeypatch.setattr(diagnostics, "_encoder_means",
+                        codes_of(lambda s: np.abs(s - 20.0) + 20.0))
+    folded = goal_aliasing(model, obs, states, goal_obs, goal)
+    from_goal = np.linalg.norm(states - goal, axis=1)
+    assert faithful < 0.1
+    assert faithful == pytest.approx(np.sort(from_goal)[:10].max() / np.median(from_goal))
+    assert folded > 1.5  # some of the nearest codes are states across the room
+    with pytest.raises(ValueError, match="neighbours must be between 1"):
+        goal_aliasing(model, obs, states, goal_obs, goal, neighbours=0)
+    with pytest.raises(ValueError, match="goal state"):
+        goal_aliasing(model, obs, states[:, :1], goal_obs, goal)
+
+
 def test_spearman_matches_known_values():
     assert cli.spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
     assert cli.spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
@@ -221,7 +254,7 @@ def test_cli_on_a_tiny_grid(tmp_path):
     assert result["spearman"]["pcc"]["n_models"] == 3
     assert "--preset tiny" in result["command"]
     text = out.with_name(out.name + ".md").read_text()
-    assert "| pcc | 2 |" in text and "goal path barrier |" in text
+    assert "| pcc | 2 |" in text and "goal path barrier | goal aliasing |" in text
     # Planar's true dynamics are x + u: every eigenvalue is 1.
     assert "The true dynamics at the goal state: spectral radius 1.000" in text
     assert result["true_goal_linearization"]["eigenvalue_moduli"] == pytest.approx([1.0, 1.0])
@@ -230,6 +263,7 @@ def test_cli_on_a_tiny_grid(tmp_path):
         assert row["min_state_r2"] == pytest.approx(min(row["state_r2"]), abs=1e-4)
         assert row["goal_drift"] >= 0 and row["goal_spectral_radius"] > 0
         assert row["goal_path_barrier"] is not None and row["goal_path_barrier"] >= 0
+        assert row["goal_aliasing"] >= 0
     with pytest.raises(SystemExit, match="at least 30"):
         cli.main(["--results-dir", str(tmp_path), "--preset", "tiny", "--samples", "20",
                   "--output", str(out)])
