@@ -253,7 +253,7 @@ def _preset_for(spec: RunSpec) -> Any:
         preset = replace(preset, train=replace(preset.train, patience=spec.patience))
     if spec.num_samples is not None:
         preset = replace(preset, data=replace(preset.data, num_samples=spec.num_samples))
-    return preset
+    return replace(preset, data=replace(preset.data, noise_std=spec.noise_std))
 
 
 def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
@@ -297,9 +297,11 @@ def _same_recipe(record: dict[str, Any], spec: RunSpec) -> bool:
         data = DataConfig(**config["data"])
     except (KeyError, TypeError, ValueError):
         return False
+    # The data's noise is the spec's (checked by _same_spec). Records written before the
+    # agent reported it carry the unused preset value 0.0 there, so it is not compared.
     return (replace(train, seed=preset.train.seed) == preset.train
             and model == model_config_for_method(preset.model, spec.method)
-            and data == preset.data)
+            and replace(data, noise_std=preset.data.noise_std) == preset.data)
 
 
 def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = None) -> dict:

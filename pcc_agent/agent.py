@@ -133,7 +133,7 @@ class PCCAgent:
         self.set_env(env)
         assert self.env is not None
         self.env_id = self.env.spec.id if self.env.spec is not None else "custom"
-        self.preset = self._resolve_preset(preset)
+        self.preset = self._with_env_noise(self._resolve_preset(preset))
         if planner is not None:
             self.preset = dataclasses.replace(self.preset, planner=planner)
         obs_shape = self.env.observation_space.shape
@@ -146,6 +146,23 @@ class PCCAgent:
         self._plan_generator = torch.Generator().manual_seed(self.seed)
 
     # ------------------------------------------------------------------ set-up helpers
+    def _with_env_noise(self, preset: EnvPreset) -> EnvPreset:
+        """The preset with its data noise set to the env's process noise.
+
+        :meth:`learn` samples the data from the env, so saved configs then say how they were
+        made.
+        """
+        assert self.env is not None
+        env_noise = float(getattr(self.env.unwrapped, "noise_std", 0.0))
+        if preset.data.noise_std not in (0.0, env_noise):
+            raise ValueError(
+                f"The preset's data noise_std is {preset.data.noise_std}, but the env's process "
+                f"noise is {env_noise}: the training data are sampled from the env, so set "
+                "the noise with env_kwargs={'noise_std': ...} instead."
+            )
+        return dataclasses.replace(preset, data=dataclasses.replace(preset.data,
+                                                                    noise_std=env_noise))
+
     def _resolve_preset(self, preset: EnvPreset | str | None) -> EnvPreset:
         if isinstance(preset, EnvPreset):
             return preset
@@ -234,7 +251,7 @@ class PCCAgent:
                 self.env_id,
                 num_samples,
                 seed=self.seed,
-                noise_std=float(getattr(core, "noise_std", 0.0)),
+                noise_std=self.preset.data.noise_std,
                 env_kwargs=kwargs or None,
                 cache_dir=self.data_cache_dir,
             )

@@ -278,6 +278,9 @@ class DataConfig:
     Attributes:
         num_samples: Number of (x_t, u_t, x_{t+1}) triples.
         noise_std: Standard deviation sigma of the Gaussian noise added to the next state.
+            The data are sampled from the agent's env, so ``PCCAgent`` sets this to the env's
+            process noise (``env_kwargs={"noise_std": ...}``); 0 here means "the env's", and
+            another value that disagrees with the env is an error.
     """
 
     num_samples: int

@@ -133,6 +133,17 @@ def test_unknown_method_is_refused():
         PCCAgent(ENV_ID, method="pcx")
 
 
+def test_config_reports_the_env_noise_its_data_are_sampled_with():
+    noisy = PCCAgent(ENV_ID, preset=tiny_preset(), seed=0, env_kwargs={"noise_std": 0.5})
+    assert noisy.config_dict()["data"]["noise_std"] == 0.5
+    assert PCCAgent(ENV_ID, preset=tiny_preset(), seed=0).config_dict()["data"]["noise_std"] == 0
+    preset = tiny_preset()
+    wants_noise = dataclasses.replace(preset, data=dataclasses.replace(preset.data,
+                                                                       noise_std=0.3))
+    with pytest.raises(ValueError, match="data noise_std is 0.3, but the env's process noise"):
+        PCCAgent(ENV_ID, preset=wants_noise, seed=0)
+
+
 def test_logger_writes_csv_when_not_verbose(tmp_path):
     agent = PCCAgent(
         ENV_ID,

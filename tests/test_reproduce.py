@@ -242,6 +242,14 @@ def test_record_of_other_settings_is_stale(tmp_path):
         other = {**config, section: {**config[section], key: value}}
         path.write_text(json.dumps({**record, "config": other}))
         assert load_finished_run(path, spec) is None, section
+    # A noisy run's record from before the agent reported the data's noise (it said the
+    # preset's unused 0.0) still counts: the noise is the spec's.
+    noisy = dataclasses.replace(spec, noise_std=1.0)
+    noisy_path = tmp_path / noisy.relative_path
+    noisy_path.parent.mkdir(parents=True)
+    noisy_path.write_text(json.dumps({**record, "spec": dataclasses.asdict(noisy)}))
+    assert config["data"]["noise_std"] == 0.0
+    assert load_finished_run(noisy_path, noisy) is not None
     # A record written before a config field existed (absent: its default) still counts.
     older_model = {k: v for k, v in config["model"].items() if k != "decoder_pixel_shuffle"}
     path.write_text(json.dumps({**record, "config": {**config, "model": older_model}}))
