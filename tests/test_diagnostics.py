@@ -216,7 +216,7 @@ def test_goal_aliasing_is_small_for_a_faithful_code_and_near_one_for_a_fold(monk
 
     monkeypatch.setattr(diagnostics, "_encoder_means", codes_of(lambda s: s))
     faithful = goal_aliasing(model, obs, states, goal_obs, goal)
-    # a fold: the code of (x, y) is that of (40 - x, 40 - y) too, so (3, 3) sits by the goal
+    # a four-fold map: (x, y), (40 - x, y), (x, 40 - y) and (40 - x, 40 - y) share a code
     monkeypatch.setattr(diagnostics, "_encoder_means",
                         codes_of(lambda s: np.abs(s - 20.0) + 20.0))
     folded = goal_aliasing(model, obs, states, goal_obs, goal)
