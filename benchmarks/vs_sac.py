@@ -174,6 +174,7 @@ def run_sac(
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm.auto import tqdm
 
+    from pcc_agent.agent import sb3_logger
     from pcc_agent.evaluation import evaluate_control
 
     if reward not in REWARDS:
@@ -205,6 +206,7 @@ def run_sac(
         device="auto",
         verbose=0,
     )
+    model.set_logger(sb3_logger(None, []))  # SB3's default makes an empty temp dir per run
     state_file = sac_state.state_path(path)
     state = sac_state.load_state(state_file, settings)
     curve: list[dict[str, Any]] = []

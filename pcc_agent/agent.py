@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
-from stable_baselines3.common.logger import Logger, configure
+from stable_baselines3.common.logger import HumanOutputFormat, Logger, configure
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 import pcc_agent
@@ -48,7 +49,21 @@ from pcc_agent.presets import (
 )
 from pcc_agent.training import TrainResult, resolve_device, train_embedding
 
-__all__ = ["PCCAgent", "collect_random_rollouts"]
+__all__ = ["PCCAgent", "collect_random_rollouts", "sb3_logger"]
+
+
+def sb3_logger(folder: str | None, formats: list[str]) -> Logger:
+    """An SB3 logger writing ``formats`` ("stdout", "csv", "tensorboard", ...) under ``folder``.
+
+    Without a folder only "stdout" (or nothing) is allowed, and no directory is made: SB3's own
+    ``configure(None, ...)`` creates an empty ``SB3-<date>`` directory in the temp dir on
+    every call, one per training run.
+    """
+    if folder is not None:
+        return configure(folder, formats)
+    if any(fmt != "stdout" for fmt in formats):
+        raise ValueError(f"logger formats {formats} write files and need a folder")
+    return Logger(folder=None, output_formats=[HumanOutputFormat(sys.stdout)] if formats else [])
 
 
 def collect_random_rollouts(
@@ -229,7 +244,7 @@ class PCCAgent:
                 formats += ["csv"]
                 if importlib.util.find_spec("tensorboard") is not None:
                     formats += ["tensorboard"]
-            self._logger = configure(self.tensorboard_log, formats)
+            self._logger = sb3_logger(self.tensorboard_log or None, formats)
         return self._logger
 
     def set_logger(self, logger: Logger) -> None:

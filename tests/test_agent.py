@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import tempfile
 
 import gymnasium as gym
 import numpy as np
@@ -12,6 +13,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 
 import pcc_envs  # noqa: F401
 from pcc_agent import PCCAgent
+from pcc_agent.agent import sb3_logger
 from pcc_agent.checkpoint import CheckpointError
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.presets import get_preset
@@ -155,3 +157,19 @@ def test_logger_writes_csv_when_not_verbose(tmp_path):
     agent.learn(total_timesteps=200)
     lines = (tmp_path / "log" / "progress.csv").read_text().splitlines()
     assert len(lines) == 3 and "train/epoch" in lines[0]
+
+
+def test_default_logger_makes_no_temp_directory(tmp_path, monkeypatch):
+    # SB3's configure(None, ...) makes an empty tempdir/SB3-<date> per call; ours must not.
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    agent = PCCAgent(ENV_ID, preset=tiny_preset(), seed=0, verbose=1,
+                     data_cache_dir=tmp_path / "data")
+    agent.logger.record("train/epoch", 1)
+    agent.logger.dump(0)
+    assert list(temp.glob("SB3-*")) == []
+    assert len(sb3_logger(None, ["stdout"]).output_formats) == 1
+    assert sb3_logger(None, []).output_formats == []
+    with pytest.raises(ValueError, match="need a folder"):
+        sb3_logger(None, ["csv"])

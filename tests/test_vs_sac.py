@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tempfile
 
 import numpy as np
 import pytest
@@ -252,3 +253,12 @@ def test_interrupted_comparison_exits_130_with_how_to_continue(tmp_path, monkeyp
     assert code == 130
     assert "run the same command again to continue" in capsys.readouterr().err
     assert not (tmp_path / "out" / "Planar-v0.json").exists()
+
+
+def test_sac_run_makes_no_temp_directory(tmp_path, monkeypatch):
+    # SB3's default logger makes an empty tempdir/SB3-<date> per learn(); one per run adds up.
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    vs_sac.run_sac("pcc/Planar-v0", "state", 0, 20, [20], [7], 50, tmp_path / "sac", "sparse")
+    assert list(temp.glob("SB3-*")) == []
