@@ -44,27 +44,41 @@ class ZeroActionPolicy:
         return np.zeros((batch, *self.action_shape), dtype=np.float32), None
 
 
+def zero_action_percentages(env_id: str, task_seed_list: Sequence[int],
+                            noise_std: float = 0.0) -> list[float]:
+    """Per-task percentage of steps in goal with zero actions, one per task seed.
+
+    Raises ``ValueError`` if the env's action space does not contain the zero action.
+    """
+    from pcc_agent.evaluation import evaluate_control
+
+    env_kwargs = {"noise_std": noise_std} if noise_std else None
+    ev = evaluate_control(lambda env: ZeroActionPolicy(env.action_space), env_id,
+                          list(task_seed_list), env_kwargs=env_kwargs, record_states=False)
+    return ev.percentages.tolist()
+
+
 def measure_floor(env_id: str, num_tasks: int, task_seed: int,
                   noise_std: float = 0.0) -> dict[str, Any]:
     """Percentage of steps in goal with zero actions on ``num_tasks`` tasks of ``env_id``."""
-    from pcc_agent.evaluation import evaluate_control, task_seeds
+    from pcc_agent.evaluation import standard_error, task_seeds
 
     seeds = task_seeds(task_seed, num_tasks)
-    env_kwargs = {"noise_std": noise_std} if noise_std else None
-    ev = evaluate_control(lambda env: ZeroActionPolicy(env.action_space), env_id, seeds,
-                          env_kwargs=env_kwargs, record_states=False)
+    percentages = zero_action_percentages(env_id, seeds, noise_std)
     return {"env_id": env_id, "noise_std": noise_std, "num_tasks": num_tasks,
-            "task_seed": task_seed, "task_seeds": seeds, "percentages": ev.percentages.tolist(),
-            "mean": ev.mean, "se": ev.standard_error}
+            "task_seed": task_seed, "task_seeds": seeds, "percentages": percentages,
+            "mean": float(np.mean(percentages)), "se": standard_error(percentages)}
 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
     """A Markdown table of the floors."""
+    from pcc_agent.evaluation import format_mean_se
+
     lines = ["| env | noise std | tasks (task seed) | % steps in goal, zero action (mean ± SE) |",
              "|---|---|---|---|"]
     for row in rows:
         lines.append(f"| {row['env_id']} | {row['noise_std']:g} | {row['num_tasks']} "
-                     f"({row['task_seed']}) | {row['mean']:.1f} ± {row['se']:.1f} |")
+                     f"({row['task_seed']}) | {format_mean_se(row['mean'], row['se'])} |")
     return "\n".join(lines) + "\n"
 
 

@@ -7,6 +7,8 @@ the same function, task seeds and metric (percentage of steps in goal) as the re
 pipeline. The PCC / E2C / RCE points (at their data-set sizes) and the oracle ceiling are
 read from the reproduction pipeline's run files for the same env and task seeds; runs on other
 tasks are left out, and an oracle missing there is run here (``runs/<env>/oracle.json``).
+The no-action floor (zero actions on the same tasks, :mod:`benchmarks.no_action_floor`) is
+measured here too: where a start lies near the goal (CartPole), doing nothing already scores.
 
 Every (env, policy, reward, budget, seed) run writes one JSON file,
 ``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json``. Finished runs are
@@ -52,6 +54,7 @@ import gymnasium as gym
 import numpy as np
 
 from benchmarks import sac_state
+from benchmarks.no_action_floor import zero_action_percentages
 from benchmarks.presets import REPRODUCE_PRESETS
 from benchmarks.reproduce import (
     ORACLE,
@@ -69,6 +72,8 @@ DEFAULT_REPRODUCE_DIR = Path("pcc_results") / "reproduce"
 FORMAT = 1
 #: Environment steps between two saves of a SAC run's training state (besides evaluations).
 DEFAULT_SAVE_EVERY = 2500
+#: ``method`` of the model-based entry that applies zero actions (the floor).
+NO_ACTION = "no-action"
 
 
 class TrueStateObservation(gym.ObservationWrapper):
@@ -409,6 +414,14 @@ def summarize(
             model_based["oracle (vs_sac)"] = {"method": ORACLE, "percentages":
                                               list(oracle["percentages"]), "num_samples": None,
                                               "preset": "vs_sac"}
+    if task_seed_list is not None:
+        try:
+            floor = zero_action_percentages(env_id, task_seed_list)
+        except ValueError:  # the zero action lies outside this env's action space: no floor
+            floor = None
+        if floor is not None:
+            model_based["no action (vs_sac)"] = {"method": NO_ACTION, "percentages": floor,
+                                                 "num_samples": None, "preset": "vs_sac"}
     for entry in model_based.values():
         values = np.asarray(entry.pop("percentages"))
         entry.update(mean=float(values.mean()), se=standard_error(values), n_tasks=int(values.size))
@@ -440,7 +453,8 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
         "|---|---|---|---|",
     ]
     for label, entry in sorted(summary["model_based"].items()):
-        samples = "- (true dynamics)" if entry["method"] == ORACLE else entry["num_samples"]
+        samples = {ORACLE: "- (true dynamics)", NO_ACTION: "- (zero actions)"}.get(
+            entry["method"], entry["num_samples"])
         lines.append(
             f"| {label} | {samples} | {format_mean_se(entry['mean'], entry['se'])} "
             f"| {entry['n_tasks']} tasks |"
@@ -463,7 +477,11 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
     oracles = [entry for _, entry in model_based if entry["method"] == ORACLE]
     if oracles:  # one ceiling, whatever preset evaluated it
         ax.axhline(oracles[0]["mean"], color="k", linestyle="--", label="oracle (true dynamics)")
-    points = [(k, e) for k, e in model_based if e["method"] != ORACLE and e["num_samples"]]
+    floors = [entry for _, entry in model_based if entry["method"] == NO_ACTION]
+    if floors:
+        ax.axhline(floors[0]["mean"], color="0.5", linestyle=":", label="no action (floor)")
+    points = [(k, e) for k, e in model_based
+              if e["method"] not in (ORACLE, NO_ACTION) and e["num_samples"]]
     # Points share the data-set size: spread them a little along the log axis to keep them apart.
     for i, (label, entry) in enumerate(points):
         dodge = 1.0 + 0.04 * (i - (len(points) - 1) / 2)

@@ -29,6 +29,11 @@ def test_vs_sac_tiny_budget(tmp_path):
     # No reproduction results: the oracle ceiling is run here, on the same task.
     oracle = summary["model_based"]["oracle (vs_sac)"]
     assert oracle["n_tasks"] == 1 and 0.0 <= oracle["mean"] <= 100.0
+    # The floor too: a Planar start is far from the goal, so zero actions never reach it.
+    floor = summary["model_based"]["no action (vs_sac)"]
+    assert floor["method"] == vs_sac.NO_ACTION and floor["n_tasks"] == 1 and floor["mean"] == 0.0
+    assert "| no action (vs_sac) | - (zero actions) | 0.0 ± n/a |" in (
+        out / "Planar-v0.md").read_text()
     # Finished runs are reused, not retrained.
     record = vs_sac.sac_run_path(out, "pcc/Planar-v0", "image", 120, 0, "sparse")
     assert record.exists()
@@ -155,6 +160,16 @@ def test_model_based_points_on_other_tasks_are_left_out(tmp_path):
         )
     points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])["model_based"]
     assert points["pcc (paper)"]["mean"] == 20.0 and points["pcc (paper)"]["n_tasks"] == 2
+
+
+def test_no_floor_where_the_zero_action_is_not_allowed(tmp_path, monkeypatch):
+    def refuse(env_id, task_seed_list, noise_std=0.0):
+        raise ValueError("the zero action is outside the action space")
+
+    monkeypatch.setattr(vs_sac, "zero_action_percentages", refuse)
+    monkeypatch.setattr(vs_sac, "oracle_point", lambda *args: None)
+    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1])["model_based"]
+    assert not any(entry["method"] == vs_sac.NO_ACTION for entry in points.values())
 
 
 def _tiny_state_run(tmp_path, **kwargs):
