@@ -29,11 +29,16 @@ from benchmarks.reproduce import _write_json_atomic, _write_text_atomic
 DEFAULT_OUTPUT = Path("benchmarks") / "results" / "no_action_floor"
 
 
+def contains_zero_action(action_space: gym.spaces.Box) -> bool:
+    """Whether the zero action lies inside the bounds of ``action_space``."""
+    return bool(np.all((action_space.low <= 0.0) & (action_space.high >= 0.0)))
+
+
 class ZeroActionPolicy:
     """An SB3-style policy that always returns the zero action (batched, like a VecEnv's)."""
 
     def __init__(self, action_space: gym.spaces.Box) -> None:
-        if not np.all((action_space.low <= 0.0) & (action_space.high >= 0.0)):
+        if not contains_zero_action(action_space):
             raise ValueError(f"the zero action is outside the action space {action_space}")
         self.action_shape = action_space.shape
 
@@ -101,11 +106,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         row = measure_floor(env_id, preset.num_tasks, preset.task_seed, args.noise)
         print(f"{env_id}: {row['mean']:.1f} ± {row['se']:.1f}% of steps in goal with no action")
         rows.append(row)
-    _write_json_atomic(args.output.with_suffix(".json"),
+    # Suffixes are appended, not swapped: "--output floor_v1.0" writes floor_v1.0.json.
+    json_path, md_path = (args.output.with_name(args.output.name + ext) for ext in (".json", ".md"))
+    _write_json_atomic(json_path,
                        {"preset": args.preset, "rows": rows,
                         "command": " ".join(["python -m benchmarks.no_action_floor", *argv])})
-    _write_text_atomic(args.output.with_suffix(".md"), format_table(rows))
-    print(f"Wrote {args.output.with_suffix('.json')} and .md")
+    _write_text_atomic(md_path, format_table(rows))
+    print(f"Wrote {json_path} and {md_path}")
     return 0
 
 

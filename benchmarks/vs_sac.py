@@ -54,7 +54,7 @@ import gymnasium as gym
 import numpy as np
 
 from benchmarks import sac_state
-from benchmarks.no_action_floor import zero_action_percentages
+from benchmarks.no_action_floor import contains_zero_action, zero_action_percentages
 from benchmarks.presets import REPRODUCE_PRESETS
 from benchmarks.reproduce import (
     ORACLE,
@@ -341,6 +341,15 @@ def oracle_point(env_id: str, task_seed_list: Sequence[int], results_dir: Path) 
     return record
 
 
+def _allows_zero_action(env_id: str) -> bool:
+    """Whether ``env_id``'s action space contains the zero action (else it has no floor)."""
+    env = gym.make(env_id)
+    try:
+        return contains_zero_action(env.action_space)
+    finally:
+        env.close()
+
+
 def summarize(
     env_id: str,
     results_dir: Path,
@@ -414,14 +423,10 @@ def summarize(
             model_based["oracle (vs_sac)"] = {"method": ORACLE, "percentages":
                                               list(oracle["percentages"]), "num_samples": None,
                                               "preset": "vs_sac"}
-    if task_seed_list is not None:
-        try:
-            floor = zero_action_percentages(env_id, task_seed_list)
-        except ValueError:  # the zero action lies outside this env's action space: no floor
-            floor = None
-        if floor is not None:
-            model_based["no action (vs_sac)"] = {"method": NO_ACTION, "percentages": floor,
-                                                 "num_samples": None, "preset": "vs_sac"}
+    if task_seed_list is not None and _allows_zero_action(env_id):
+        model_based["no action (vs_sac)"] = {
+            "method": NO_ACTION, "percentages": zero_action_percentages(env_id, task_seed_list),
+            "num_samples": None, "preset": "vs_sac"}
     for entry in model_based.values():
         values = np.asarray(entry.pop("percentages"))
         entry.update(mean=float(values.mean()), se=standard_error(values), n_tasks=int(values.size))

@@ -152,17 +152,20 @@ def evaluate_control(
         episode_length = int(env.spec.max_episode_steps) if env.spec else 0
         vec_env = DummyVecEnv([lambda env=env: Monitor(env)])
         vec_env.seed(int(seed))
-        controller = policy(env) if callable(policy) and not hasattr(policy, "predict") else policy
         recorder = _EpisodeRecorder(record_states)
-        evaluate_policy(
-            controller,
-            vec_env,
-            n_eval_episodes=1,
-            deterministic=deterministic,
-            callback=recorder,
-            warn=False,
-        )
-        vec_env.close()
+        try:  # a failing controller factory or policy must not leave the env (pybullet) open
+            controller = (policy(env) if callable(policy) and not hasattr(policy, "predict")
+                          else policy)
+            evaluate_policy(
+                controller,
+                vec_env,
+                n_eval_episodes=1,
+                deterministic=deterministic,
+                callback=recorder,
+                warn=False,
+            )
+        finally:
+            vec_env.close()
         in_goal, states = recorder.in_goal, recorder.states
         denominator = max(episode_length, len(in_goal))
         results.append(

@@ -164,6 +164,7 @@ def test_default_logger_makes_no_temp_directory(tmp_path, monkeypatch):
     temp = tmp_path / "temp"
     temp.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)  # SB3 would write there instead
     agent = PCCAgent(ENV_ID, preset=tiny_preset(), seed=0, verbose=1,
                      data_cache_dir=tmp_path / "data")
     agent.logger.record("train/epoch", 1)
