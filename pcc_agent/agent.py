@@ -21,6 +21,7 @@ import dataclasses
 import importlib.util
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -188,7 +189,7 @@ class PCCAgent:
             if preset is not None and self.env_id.startswith("pcc/"):
                 raise
             return default_preset_for_spaces(
-                self.env.observation_space, self.env.action_space, self.env_id
+                self.env.observation_space, self.env.action_space, self.env_id, variant=variant
             )
 
     def _build_model(self, config: ModelConfig) -> EmbeddingModel:
@@ -288,6 +289,9 @@ class PCCAgent:
     ) -> PCCAgent:
         """Collect transitions, train the embedding, set the goal.
 
+        The goal is ``goal_obs`` or the env's ``goal_observation()``. An env with neither gets
+        a trained model and a warning: call :meth:`set_goal` before :meth:`predict`.
+
         Args:
             total_timesteps: Transitions to collect with the env's sampler (the paper's
                 uniform protocol; random-policy rollouts for a foreign env). Default: the
@@ -358,9 +362,11 @@ class PCCAgent:
         if sb3_callback is not None:
             sb3_callback.on_training_end()
         if self._goal_obs is None:
-            raise ValueError(
-                "No goal: this env has no goal_observation(); pass goal_obs= to PCCAgent or "
-                "call set_goal(obs) before predict()."
+            # The trained embedding serves any goal: keep it, and say what predict() needs.
+            warnings.warn(
+                "No goal yet: this env has no goal_observation() and no goal_obs= was given; "
+                "call set_goal(goal_obs) before predict().",
+                stacklevel=2,
             )
         return self
 

@@ -174,3 +174,72 @@ def test_default_logger_makes_no_temp_directory(tmp_path, monkeypatch):
     assert sb3_logger(None, []).output_formats == []
     with pytest.raises(ValueError, match="need a folder"):
         sb3_logger(None, ["csv"])
+
+
+class DotEnv(gym.Env):
+    """A user's own image env: a dot on a 16x16 grid, moved by the action; two frames."""
+
+    def __init__(self, size: int = 16) -> None:
+        self.observation_space = gym.spaces.Box(0, 255, (2, size, size), np.uint8)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+    @staticmethod
+    def frame(position: np.ndarray) -> np.ndarray:
+        image = np.zeros((16, 16), np.uint8)
+        row, col = np.clip(np.round(position), 0, 15).astype(int)
+        image[row, col] = 255
+        return image
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.position = self.np_random.uniform(0.0, 15.0, 2)
+        return np.stack([self.frame(self.position)] * 2), {}
+
+    def step(self, action):
+        before = self.frame(self.position)
+        self.position = np.clip(self.position + np.asarray(action, np.float64), 0.0, 15.0)
+        reward = -float(np.sum((self.position - 8.0) ** 2))
+        return np.stack([before, self.frame(self.position)]), reward, False, False, {}
+
+
+def test_own_image_env_trains_plans_and_reloads(tmp_path):
+    from pcc_agent.presets import default_preset_for_spaces
+
+    env = gym.wrappers.TimeLimit(DotEnv(), max_episode_steps=10)
+    preset = default_preset_for_spaces(env.observation_space, env.action_space)
+    preset = dataclasses.replace(
+        preset, train=dataclasses.replace(preset.train, epochs=2, batch_size=64),
+        planner=PlannerConfig(plan_length=5, iterations=2, mpc_iterations=1, num_candidates=2))
+    agent = PCCAgent(env, preset=preset, seed=0)
+    # No goal_observation() on this env: the trained model is kept, predict() waits for a goal.
+    with pytest.warns(UserWarning, match="set_goal"):
+        agent.learn(total_timesteps=300)
+    assert agent.train_result is not None and agent.num_timesteps == 300
+    obs, _ = env.reset(seed=1)
+    with pytest.raises(RuntimeError, match="No goal set"):
+        agent.predict(obs)
+    goal = np.stack([DotEnv.frame(np.array([8.0, 8.0]))] * 2)
+    agent.set_goal(goal)
+    action, _ = agent.predict(obs)
+    assert action.shape == (2,) and env.action_space.contains(action)
+    mean_reward, _ = evaluate_policy(agent, env, n_eval_episodes=1, warn=False)
+    assert np.isfinite(mean_reward)
+    agent.save(tmp_path / "dot.pt")
+    loaded = PCCAgent.load(tmp_path / "dot.pt", env=env)
+    np.testing.assert_array_equal(loaded.goal_observation, goal)
+    np.testing.assert_array_equal(loaded.predict(obs)[0], PCCAgent.load(tmp_path / "dot.pt",
+                                                                         env=env).predict(obs)[0])
+
+
+def test_own_env_gets_the_asked_variant():
+    from pcc_agent.presets import default_preset_for_spaces
+
+    env = DotEnv(size=64)  # above 48x48: a CNN, the paper's or the CPU-friendly one
+    fast = default_preset_for_spaces(env.observation_space, env.action_space, variant="fast")
+    paper = default_preset_for_spaces(env.observation_space, env.action_space)
+    assert fast.model != paper.model
+    assert PCCAgent(env, preset="fast", seed=0).preset.model.encoder_convs == (
+        fast.model.encoder_convs)
+    assert PCCAgent(env, seed=0).preset.model.encoder_convs == paper.model.encoder_convs
+    with pytest.raises(ValueError, match="variant"):
+        PCCAgent(env, preset="huge", seed=0)
