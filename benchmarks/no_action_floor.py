@@ -88,6 +88,8 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from pcc_agent.evaluation import format_mean_se
+
     parser = argparse.ArgumentParser(prog="python -m benchmarks.no_action_floor",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=list(ALL_ENVS), choices=ALL_ENVS)
@@ -104,7 +106,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     rows = []
     for env_id in args.envs:
         row = measure_floor(env_id, preset.num_tasks, preset.task_seed, args.noise)
-        print(f"{env_id}: {row['mean']:.1f} ± {row['se']:.1f}% of steps in goal with no action")
+        print(f"{env_id}: {format_mean_se(row['mean'], row['se'])}% of steps in goal with no "
+              "action")
         rows.append(row)
     # Suffixes are appended, not swapped: "--output floor_v1.0" writes floor_v1.0.json.
     json_path, md_path = (args.output.with_name(args.output.name + ext) for ext in (".json", ".md"))

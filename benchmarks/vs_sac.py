@@ -343,6 +343,8 @@ def oracle_point(env_id: str, task_seed_list: Sequence[int], results_dir: Path) 
 
 def _allows_zero_action(env_id: str) -> bool:
     """Whether ``env_id``'s action space contains the zero action (else it has no floor)."""
+    if env_id.startswith("pcc/"):
+        import pcc_envs  # noqa: F401  (registers the pcc/ ids)
     env = gym.make(env_id)
     try:
         return contains_zero_action(env.action_space)
