@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.reproduce import (
-    ORACLE,
+    REFERENCE_METHODS,
     RunSpec,
     _write_json_atomic,
     _write_text_atomic,
@@ -108,7 +108,7 @@ def _diagnose_run(
     )
 
     spec = RunSpec(**record["spec"])
-    if (spec.method == ORACLE or spec.env_id != env_id or spec.preset != preset
+    if (spec.method in REFERENCE_METHODS or spec.env_id != env_id or spec.preset != preset
             or is_restart_training(record["spec"])):  # the grid's models 0 .. N-1 only
         return None
     agent_file = checkpoint_path(results_dir, spec)

@@ -7,7 +7,8 @@ trajectories). Finished runs are skipped, so an interrupted grid resumes where i
 files are written atomically, so a killed run never leaves a partial result that counts.
 Then it aggregates every run file into ``summary.json`` and ``summary.md`` (mean and standard
 error over all tasks and for the top-1 model, IQM with a bootstrap interval across models,
-the paper's numbers beside ours, the oracle controller as the ceiling) and a bar chart.
+the paper's numbers beside ours, the oracle controller as the ceiling and zero actions as the
+floor) and a bar chart.
 
 Examples:
     python -m benchmarks.reproduce --preset quick
@@ -53,6 +54,12 @@ from benchmarks.presets import (
 DEFAULT_RESULTS_DIR = Path("pcc_results") / "reproduce"
 RESULT_FORMAT = 1
 ORACLE = "oracle"
+#: The controller that applies zero actions: the floor beside the oracle's ceiling. Where a
+#: start lies near the goal (CartPole) doing nothing already scores, and a learned controller
+#: is only useful above it.
+NO_ACTION = "no-action"
+#: Controllers that train nothing: one run per (env, noise level), no data set, no checkpoint.
+REFERENCE_METHODS = (ORACLE, NO_ACTION)
 #: Epochs between a run's training checkpoints: a run cut short (Ctrl-C, a crash, the end of
 #: a working session) resumes from its last one; at most this many epochs are redone.
 TRAIN_CHECKPOINT_EVERY = 5
@@ -264,6 +271,8 @@ def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
     """
     from pcc_agent.planning import PLANNER_REVISION
 
+    if spec.method == NO_ACTION:  # plans nothing
+        return True
     config = record.get("config", {})
     if config.get("planner_revision", 1) != PLANNER_REVISION:
         return False
@@ -284,7 +293,7 @@ def _same_recipe(record: dict[str, Any], spec: RunSpec) -> bool:
     own (``spec.seed``, checked with the spec), not the preset's. Oracle records train
     nothing and always match.
     """
-    if spec.method == ORACLE:
+    if spec.method in REFERENCE_METHODS:
         return True
     from pcc_agent.losses import model_config_for_method
     from pcc_agent.presets import DataConfig, ModelConfig, TrainConfig
@@ -326,7 +335,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     trained = load_finished_run(path)
     if (
         trained is not None
-        and spec.method != ORACLE
+        and spec.method not in REFERENCE_METHODS
         and _same_spec(trained.get("spec"), spec)
         and _same_recipe(trained, spec)
         and checkpoint_path(results_dir, spec).exists()
@@ -349,6 +358,15 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         evaluation_start = time.perf_counter()
         evaluation = evaluate_control(
             lambda env: OracleController(env, config), spec.env_id, seeds, env_kwargs
+        )
+    elif spec.method == NO_ACTION:
+        from benchmarks.no_action_floor import ZeroActionPolicy
+
+        record["config"] = {"no_action": True}
+        record["train_seconds"] = 0.0
+        evaluation_start = time.perf_counter()
+        evaluation = evaluate_control(
+            lambda env: ZeroActionPolicy(env.action_space), spec.env_id, seeds, env_kwargs
         )
     else:
         from pcc_agent.agent import PCCAgent
@@ -385,7 +403,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     record["mean"] = evaluation.mean
     record["status"] = "done"
     _write_json_atomic(path, record)
-    if spec.method != ORACLE:  # the training is complete and its record written
+    if spec.method not in REFERENCE_METHODS:  # the training is complete, its record written
         _remove_training_checkpoint(training_checkpoint_path(results_dir, spec))
     return record
 
@@ -441,8 +459,12 @@ def _has_oracle(env_id: str) -> bool:
     return env_id in ORACLE_CONFIGS
 
 
-def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[RunSpec]:
-    """All runs of a preset, oracle runs first (one per env and noise level).
+def expand_grid(preset: ReproducePreset, include_oracle: bool = True,
+                include_floor: bool | None = None) -> list[RunSpec]:
+    """All runs of a preset, the reference runs first (one each per env and noise level).
+
+    The references are the oracle (where the env has one) and the no-action floor;
+    ``include_floor`` defaults to ``include_oracle``.
 
     A ``restarts`` preset's runs are its trainings, filed under ``preset.runs_preset``: the
     first training of every model, then the second, and so on.
@@ -460,6 +482,8 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True) -> list[Ru
             }
             if include_oracle and _has_oracle(env_id):
                 runs.append(RunSpec(method=ORACLE, seed=0, **common))
+            if include_oracle if include_floor is None else include_floor:
+                runs.append(RunSpec(method=NO_ACTION, seed=0, **common))
             trainings = [m + k * RESTART_SEED_STRIDE for k in range(preset.restarts)
                          for m in preset.seeds()]
             for seed in trainings:
@@ -718,19 +742,27 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         if is_restart_training(s):
             continue
         groups.setdefault((s["env_id"], s["method"], s["noise_std"], s["preset"]), []).append(rec)
-    oracle = {
-        (k[0], k[2], k[3]): float(np.mean(v[0]["percentages"]))
-        for k, v in groups.items()
-        if k[1] == ORACLE
-    }
-    # The oracle does not depend on the model variant: a preset without its own oracle run
-    # uses another preset's on the same tasks (same env, noise, task seed and task count).
-    oracle_by_tasks = {
-        (k[0], k[2], v[0]["spec"].get("task_seed"), len(v[0]["percentages"])):
-            float(np.mean(v[0]["percentages"]))
-        for k, v in groups.items()
-        if k[1] == ORACLE
-    }
+    def reference_means(method: str) -> tuple[dict[Any, float], dict[Any, float]]:
+        """A reference controller's mean per (env, noise, preset), and per task set.
+
+        The references do not depend on the model variant: a preset without its own run uses
+        another preset's on the same tasks (same env, noise, task seed and task count).
+        """
+        own = {(k[0], k[2], k[3]): float(np.mean(v[0]["percentages"]))
+               for k, v in groups.items() if k[1] == method}
+        by_tasks = {(k[0], k[2], v[0]["spec"].get("task_seed"), len(v[0]["percentages"])):
+                    float(np.mean(v[0]["percentages"]))
+                    for k, v in groups.items() if k[1] == method}
+        return own, by_tasks
+
+    references = {method: reference_means(method) for method in REFERENCE_METHODS}
+
+    def reference_mean(method: str, env_id: str, noise: float, preset: str,
+                       recs: list[dict[str, Any]]) -> float | None:
+        own, by_tasks = references[method]
+        tasks = (env_id, noise, recs[0]["spec"].get("task_seed"), len(recs[0]["percentages"]))
+        return own.get((env_id, noise, preset), by_tasks.get(tasks))
+
     rows = []
     for (env_id, method, noise, preset), recs in sorted(groups.items()):
         recs = sorted(recs, key=lambda r: r["spec"]["seed"])
@@ -750,7 +782,7 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
             "n_models": len(recs),
             # The preset's grid size: a row with fewer models is a reduced grid.
             "n_models_planned": (
-                1 if method == ORACLE else planned.num_models if planned else None),
+                1 if method in REFERENCE_METHODS else planned.num_models if planned else None),
             "n_tasks": int(np.median([m.size for m in per_model])),
             "seeds": [r["spec"]["seed"] for r in recs],
             "task_seed": recs[0]["spec"].get("task_seed"),
@@ -761,10 +793,8 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
             "top1_seed": recs[best]["spec"]["seed"],
             "iqm": interquartile_mean(all_tasks),
             "iqm_ci": list(bootstrap_iqm_ci(per_model)) if len(per_model) > 1 else None,
-            "oracle_mean": oracle.get(
-                (env_id, noise, preset),
-                oracle_by_tasks.get((env_id, noise, recs[0]["spec"].get("task_seed"),
-                                     len(per_model[0])))),
+            "oracle_mean": reference_mean(ORACLE, env_id, noise, preset, recs),
+            "floor_mean": reference_mean(NO_ACTION, env_id, noise, preset, recs),
             "train_seconds_mean": float(np.mean([r["train_seconds"] for r in recs])),
             "settings": recs[0].get("config", {}),
         }
@@ -815,19 +845,20 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The summary as a Markdown table, our numbers beside the paper's."""
     lines = [
         "| env | method | noise | preset (variant) | models x tasks | ours: all | paper: all "
-        "| ours: top-1 | paper: top-1 | IQM [95% CI] | oracle |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| ours: top-1 | paper: top-1 | IQM [95% CI] | oracle | no action |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         ci = r["iqm_ci"]
         iqm = f"{r['iqm']:.1f}" + (f" [{ci[0]:.1f}, {ci[1]:.1f}]" if ci else "")
-        oracle = "-" if r["oracle_mean"] is None else f"{r['oracle_mean']:.1f}"
+        oracle, floor = ("-" if r.get(key) is None else f"{r[key]:.1f}"
+                         for key in ("oracle_mean", "floor_mean"))
         lines.append(
             f"| {r['env']} | {r['method']} | {r['noise_std']:g} | {r['preset']} "
             f"({r['model_variant']}) | {_models_cell(r)} "
             f"| {_fmt((r['mean_all'], r['se_all']))} | {_fmt(r['paper_all'])} "
             f"| {_fmt((r['mean_top1'], r['se_top1']))} | {_fmt(r['paper_top1'])} | {iqm} "
-            f"| {oracle} |"
+            f"| {oracle} | {floor} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -853,7 +884,8 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
 
     seen: dict[tuple[str, str, str], dict[str, Any]] = {}
     for r in rows:
-        if r["method"] != ORACLE and (r["env"], r["preset"], r["method"]) not in seen:
+        if (r["method"] not in REFERENCE_METHODS
+                and (r["env"], r["preset"], r["method"]) not in seen):
             seen[(r["env"], r["preset"], r["method"])] = r
     lines = [
         "| env | preset | method | episode length | plan length | iLQR iters (first / MPC) "
@@ -928,7 +960,7 @@ def select_restarts(
         for rec in records:
             s = rec["spec"]
             filed = str(s.get("preset", ""))
-            if s["method"] == ORACLE or not (
+            if s["method"] in REFERENCE_METHODS or not (
                     filed == preset.runs_preset or filed.startswith(preset.runs_preset + "+")):
                 continue
             overrides = filed[len(preset.runs_preset):]
@@ -989,7 +1021,9 @@ def write_summary(results_dir: Path) -> list[dict[str, Any]]:
         "Mean ± standard error over all tasks of all models (`all`) and over the best model's "
         "tasks (`top-1`). The paper's LaneKeeping numbers are its TORCS domain. "
         "`k of N x M (reduced grid)`: only k of the preset's N models have been run. A preset "
-        "name `base+field=value` marks runs with command-line overrides of the preset.\n\n"
+        "name `base+field=value` marks runs with command-line overrides of the preset. "
+        "`oracle`: iLQR-MPC on the true state and dynamics (the ceiling); `no action`: zero "
+        "actions on the same tasks (the floor; above 0 where starts lie in the goal region).\n\n"
         + "\n".join(sections)
         + "\n## Evaluation settings\n\n"
         + settings_table(rows)
@@ -1007,7 +1041,7 @@ def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = [r for r in rows if r["method"] != ORACLE]
+    rows = [r for r in rows if r["method"] not in REFERENCE_METHODS]
     if not rows:
         return
     labels = [f"{r['env'].split('/')[1]}\n{r['method']}\n{r['preset']}" for r in rows]
@@ -1027,9 +1061,11 @@ def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
     for xi, r in zip(x, rows):
         if r["oracle_mean"] is not None:
             ax.hlines(r["oracle_mean"], xi - 0.45, xi + 0.45, colors="k", linestyles="--")
+        if r.get("floor_mean"):  # a floor of 0 would only hide the axis
+            ax.hlines(r["floor_mean"], xi - 0.45, xi + 0.45, colors="0.4", linestyles=":")
     ax.set_xticks(x, labels, fontsize=7)
     ax.set_ylabel("% of steps in goal")
-    ax.set_title("Control from pixels (dashed: oracle on the true state)")
+    ax.set_title("Control from pixels (dashed: oracle on the true state; dotted: zero actions)")
     ax.legend()
     fig.tight_layout()
     _save_figure_atomic(fig, path)
@@ -1055,8 +1091,8 @@ def _cap_seconds(spec: RunSpec, measured: dict[tuple[str, str, str], float]) -> 
     """Seconds for one run that trains to its epoch cap (early stopping makes it shorter)."""
     from pcc_agent.presets import get_preset
 
-    if spec.method == ORACLE:
-        return 300.0
+    if spec.method in REFERENCE_METHODS:
+        return 300.0 if spec.method == ORACLE else 30.0
     preset = get_preset(spec.env_id, spec.model_variant)
     samples = spec.num_samples or preset.data.num_samples
     epochs = spec.max_epochs or preset.train.epochs
@@ -1092,7 +1128,7 @@ def estimate_cost(
         except (KeyError, TypeError, ValueError):  # an older or hand-made record
             continue
         observed.setdefault(_cost_key(spec), []).append(seconds)
-        if spec.method != ORACLE:
+        if spec.method not in REFERENCE_METHODS:
             observed.setdefault(_cost_key(spec, with_method=False), []).append(seconds)
     expected = upper = 0.0
     from_records = 0
@@ -1100,7 +1136,7 @@ def estimate_cost(
         cap = _cap_seconds(spec, measured)
         upper += cap
         seen = observed.get(_cost_key(spec))
-        if not seen and spec.method != ORACLE:
+        if not seen and spec.method not in REFERENCE_METHODS:
             seen = observed.get(_cost_key(spec, with_method=False))
         if seen:
             expected += float(np.median(seen))
@@ -1159,7 +1195,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="Override the early-stopping patience (epochs without validation improvement).",
     )
     parser.add_argument("--noise", type=float, nargs="+", help="Override the noise levels.")
-    parser.add_argument("--no-oracle", action="store_true", help="Skip the oracle ceiling.")
+    parser.add_argument("--no-oracle", action="store_true",
+                        help="Skip the oracle ceiling (and the floor, unless --floor).")
+    parser.add_argument("--no-floor", dest="floor", action="store_false", default=None,
+                        help="Skip the no-action floor (zero actions on the same tasks).")
+    parser.add_argument("--floor", dest="floor", action="store_true",
+                        help="Run the no-action floor even with --no-oracle.")
     parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
     parser.add_argument(
         "--data-dir",
@@ -1231,7 +1272,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["noise_levels"] = tuple(args.noise)
             changes["env_noise_levels"] = {}
         preset = preset.override(**changes)
-        runs = expand_grid(preset, include_oracle=not args.no_oracle)
+        runs = expand_grid(preset, include_oracle=not args.no_oracle, include_floor=args.floor)
         if args.status:
             print("\n".join(training_progress(results_dir, run) for run in runs))
             return 0

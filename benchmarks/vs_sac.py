@@ -7,8 +7,8 @@ the same function, task seeds and metric (percentage of steps in goal) as the re
 pipeline. The PCC / E2C / RCE points (at their data-set sizes) and the oracle ceiling are
 read from the reproduction pipeline's run files for the same env and task seeds; runs on other
 tasks are left out, and an oracle missing there is run here (``runs/<env>/oracle.json``).
-The no-action floor (zero actions on the same tasks, :mod:`benchmarks.no_action_floor`) is
-measured here too: where a start lies near the goal (CartPole), doing nothing already scores.
+So is the no-action floor (zero actions on the same tasks): where a start lies near the goal
+(CartPole), doing nothing already scores; a floor missing there is measured here.
 
 Every (env, policy, reward, budget, seed) run writes one JSON file,
 ``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json``. Finished runs are
@@ -57,6 +57,7 @@ from benchmarks import sac_state
 from benchmarks.no_action_floor import contains_zero_action, zero_action_percentages
 from benchmarks.presets import REPRODUCE_PRESETS
 from benchmarks.reproduce import (
+    NO_ACTION,
     ORACLE,
     _positive_int,
     _save_figure_atomic,
@@ -72,8 +73,6 @@ DEFAULT_REPRODUCE_DIR = Path("pcc_results") / "reproduce"
 FORMAT = 1
 #: Environment steps between two saves of a SAC run's training state (besides evaluations).
 DEFAULT_SAVE_EVERY = 2500
-#: ``method`` of the model-based entry that applies zero actions (the floor).
-NO_ACTION = "no-action"
 
 
 class TrueStateObservation(gym.ObservationWrapper):
@@ -425,7 +424,9 @@ def summarize(
             model_based["oracle (vs_sac)"] = {"method": ORACLE, "percentages":
                                               list(oracle["percentages"]), "num_samples": None,
                                               "preset": "vs_sac"}
-    if task_seed_list is not None and _allows_zero_action(env_id):
+    if (task_seed_list is not None
+            and not any(entry["method"] == NO_ACTION for entry in model_based.values())
+            and _allows_zero_action(env_id)):
         model_based["no action (vs_sac)"] = {
             "method": NO_ACTION, "percentages": zero_action_percentages(env_id, task_seed_list),
             "num_samples": None, "preset": "vs_sac"}

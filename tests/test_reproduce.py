@@ -563,3 +563,38 @@ def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
     assert sorted(picked) == [0, 1]
     assert picked[0]["mean"] == 75.0 and len(picked[0]["restarts"]) == 2
     assert picked[1]["selected_training_seed"] == 1 and picked[1]["mean"] == 70.0
+
+
+def test_grid_has_a_no_action_floor_per_env_and_noise_level():
+    from benchmarks.presets import REPRODUCE_PRESETS
+    from benchmarks.reproduce import NO_ACTION, expand_grid
+
+    preset = REPRODUCE_PRESETS["paper-noisy"].override(envs=("pcc/Planar-v0",),
+                                                        methods=("pcc",), model_seeds=(0,))
+    floors = [r for r in expand_grid(preset) if r.method == NO_ACTION]
+    assert sorted(r.noise_std for r in floors) == sorted(preset.noise_levels_for("pcc/Planar-v0"))
+    assert not any(r.method == NO_ACTION for r in expand_grid(preset, include_oracle=False))
+    only_floor = expand_grid(preset, include_oracle=False, include_floor=True)
+    assert {r.method for r in only_floor} == {NO_ACTION, "pcc"}
+
+
+def test_no_action_run_scores_the_starts_inside_the_goal_and_is_skipped_once_done(tmp_path):
+    from benchmarks.reproduce import NO_ACTION, markdown_table
+
+    # CartPole task seed 2020: the first start lies outside the goal, the second inside it.
+    spec = RunSpec(env_id="pcc/CartPole-v0", method=NO_ACTION, seed=0, noise_std=0.0,
+                   num_tasks=2, task_seed=2020, model_variant="paper", preset="test")
+    record = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    assert record["train_seconds"] == 0.0 and record["config"] == {"no_action": True}
+    assert record["percentages"][0] == 0.0 and record["percentages"][1] > 0.0
+    assert not (tmp_path / "data").exists()  # no data set, no model
+    assert execute_run(spec, tmp_path, str(tmp_path / "data")).get("skipped") is True
+    # The floor is a column of every row on the same tasks, beside the oracle's ceiling.
+    model = {"spec": {**dataclasses.asdict(spec), "method": "pcc", "preset": "other"},
+             "percentages": [5.0, 15.0], "train_seconds": 1.0}
+    rows = aggregate([record, model])
+    pcc = next(r for r in rows if r["method"] == "pcc")
+    assert pcc["floor_mean"] == np.mean(record["percentages"]) and pcc["oracle_mean"] is None
+    table = markdown_table(rows)
+    assert "| oracle | no action |" in table
+    assert f"| - | {pcc['floor_mean']:.1f} |" in table

@@ -275,3 +275,19 @@ def test_sac_run_makes_no_temp_directory(tmp_path, monkeypatch):
     monkeypatch.delenv("SB3_LOGDIR", raising=False)  # SB3 would write there instead
     vs_sac.run_sac("pcc/Planar-v0", "state", 0, 20, [20], [7], 50, tmp_path / "sac", "sparse")
     assert list(temp.glob("SB3-*")) == []
+
+
+def test_floor_of_the_reproduction_runs_is_used_not_measured_again(tmp_path, monkeypatch):
+    from benchmarks.reproduce import NO_ACTION, _write_json_atomic
+
+    _write_json_atomic(
+        tmp_path / "runs" / "floor.json",
+        {"format": 1, "status": "done", "task_seeds": [1, 2], "percentages": [0.0, 40.0],
+         "spec": {"env_id": "pcc/Planar-v0", "method": NO_ACTION, "noise_std": 0.0,
+                  "preset": "paper"}, "config": {"no_action": True}},
+    )
+    monkeypatch.setattr(vs_sac, "oracle_point", lambda *args: None)
+    monkeypatch.setattr(vs_sac, "zero_action_percentages", lambda *args: pytest.fail("re-run"))
+    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])["model_based"]
+    assert points["no-action (paper)"]["mean"] == 20.0
+    assert "no action (vs_sac)" not in points
