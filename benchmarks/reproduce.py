@@ -67,7 +67,7 @@ TRAIN_CHECKPOINT_EVERY = 5
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One cell of the grid: one model (or the oracle) and its control tasks."""
+    """One cell of the grid: one model (or a reference controller) and its control tasks."""
 
     env_id: str
     method: str
@@ -267,7 +267,8 @@ def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
     """Whether a record was evaluated by this planner revision with the preset's settings.
 
     Records without a revision were evaluated by revision 1. Oracle records are compared
-    with the env's current ``ORACLE_CONFIGS`` entry.
+    with the env's current ``ORACLE_CONFIGS`` entry; no-action records plan nothing and
+    always match.
     """
     from pcc_agent.planning import PLANNER_REVISION
 
@@ -290,8 +291,8 @@ def _same_recipe(record: dict[str, Any], spec: RunSpec) -> bool:
 
     Compared as dataclasses, so a config field added to the library later (with a default
     that keeps the old behaviour) leaves older records valid. The training seed is the run's
-    own (``spec.seed``, checked with the spec), not the preset's. Oracle records train
-    nothing and always match.
+    own (``spec.seed``, checked with the spec), not the preset's. Reference records (oracle,
+    no action) train nothing and always match.
     """
     if spec.method in REFERENCE_METHODS:
         return True

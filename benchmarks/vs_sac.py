@@ -361,8 +361,8 @@ def summarize(
 
     One curve per policy, reward and step budget, keyed
     ``"sac_<observation>[_sparse] (<steps> steps)"``. With ``task_seed_list``, only runs
-    evaluated on exactly these tasks count, and the oracle is run on them if the
-    reproduction results have none.
+    evaluated on exactly these tasks count, and the oracle and the no-action floor are run on
+    them if the reproduction results have none.
     """
     from pcc_agent.evaluation import standard_error
 
@@ -427,7 +427,7 @@ def summarize(
     if (task_seed_list is not None
             and not any(entry["method"] == NO_ACTION for entry in model_based.values())
             and _allows_zero_action(env_id)):
-        model_based["no action (vs_sac)"] = {
+        model_based[f"{NO_ACTION} (vs_sac)"] = {
             "method": NO_ACTION, "percentages": zero_action_percentages(env_id, task_seed_list),
             "num_samples": None, "preset": "vs_sac"}
     for entry in model_based.values():

@@ -438,7 +438,8 @@ class PCCAgent:
         """
         obs = self._check_obs(observation)
         if self._goal_obs is None:
-            raise RuntimeError("No goal set: call learn() or set_goal(goal_obs) first.")
+            raise RuntimeError("No goal set: call set_goal(goal_obs) first (learn() sets it only "
+                               "on an env with goal_observation()).")
         single = obs.shape == self.obs_shape
         batch = obs[None] if single else obs
         n = batch.shape[0]

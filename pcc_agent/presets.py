@@ -559,6 +559,8 @@ def default_preset_for_spaces(
         )
     if not isinstance(action_space, gym.spaces.Box) or len(action_space.shape) != 1:
         raise ValueError(f"Expected a flat continuous action space Box((n,)), got {action_space}.")
+    if variant not in ("paper", "fast"):
+        raise ValueError(f"variant must be 'paper' or 'fast', got {variant!r}.")
     frames, height, width = shape
     pixels = height * width
     action_dim = int(action_space.shape[0])
@@ -567,8 +569,6 @@ def default_preset_for_spaces(
         latent_dim = max(base.latent_dim, min(8, math.ceil(action_dim * 1.5)))
         model = dataclasses.replace(base, latent_dim=latent_dim)
     else:
-        if variant not in ("paper", "fast"):
-            raise ValueError(f"variant must be 'paper' or 'fast', got {variant!r}.")
         base = _CARTPOLE_MODEL if variant == "paper" else _fast_cnn_model(8, 200, 200)
         last = base.decoder_convs[-1]
         model = dataclasses.replace(

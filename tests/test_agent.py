@@ -180,32 +180,34 @@ class DotEnv(gym.Env):
     """A user's own image env: a dot on a 16x16 grid, moved by the action; two frames."""
 
     def __init__(self, size: int = 16) -> None:
+        self.size = size
         self.observation_space = gym.spaces.Box(0, 255, (2, size, size), np.uint8)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
 
-    @staticmethod
-    def frame(position: np.ndarray) -> np.ndarray:
-        image = np.zeros((16, 16), np.uint8)
-        row, col = np.clip(np.round(position), 0, 15).astype(int)
+    def frame(self, position: np.ndarray) -> np.ndarray:
+        image = np.zeros((self.size, self.size), np.uint8)
+        row, col = np.clip(np.round(position), 0, self.size - 1).astype(int)
         image[row, col] = 255
         return image
 
     def reset(self, seed=None, options=None):
         super().reset(seed=seed)
-        self.position = self.np_random.uniform(0.0, 15.0, 2)
+        self.position = self.np_random.uniform(0.0, self.size - 1.0, 2)
         return np.stack([self.frame(self.position)] * 2), {}
 
     def step(self, action):
         before = self.frame(self.position)
-        self.position = np.clip(self.position + np.asarray(action, np.float64), 0.0, 15.0)
-        reward = -float(np.sum((self.position - 8.0) ** 2))
+        self.position = np.clip(self.position + np.asarray(action, np.float64), 0.0,
+                                self.size - 1.0)
+        reward = -float(np.sum((self.position - self.size / 2) ** 2))
         return np.stack([before, self.frame(self.position)]), reward, False, False, {}
 
 
 def test_own_image_env_trains_plans_and_reloads(tmp_path):
     from pcc_agent.presets import default_preset_for_spaces
 
-    env = gym.wrappers.TimeLimit(DotEnv(), max_episode_steps=10)
+    dots = DotEnv()
+    env = gym.wrappers.TimeLimit(dots, max_episode_steps=10)
     preset = default_preset_for_spaces(env.observation_space, env.action_space)
     preset = dataclasses.replace(
         preset, train=dataclasses.replace(preset.train, epochs=2, batch_size=64),
@@ -218,7 +220,7 @@ def test_own_image_env_trains_plans_and_reloads(tmp_path):
     obs, _ = env.reset(seed=1)
     with pytest.raises(RuntimeError, match="No goal set"):
         agent.predict(obs)
-    goal = np.stack([DotEnv.frame(np.array([8.0, 8.0]))] * 2)
+    goal = np.stack([dots.frame(np.array([8.0, 8.0]))] * 2)
     agent.set_goal(goal)
     action, _ = agent.predict(obs)
     assert action.shape == (2,) and env.action_space.contains(action)
@@ -241,5 +243,6 @@ def test_own_env_gets_the_asked_variant():
     assert PCCAgent(env, preset="fast", seed=0).preset.model.encoder_convs == (
         fast.model.encoder_convs)
     assert PCCAgent(env, seed=0).preset.model.encoder_convs == paper.model.encoder_convs
-    with pytest.raises(ValueError, match="variant"):
-        PCCAgent(env, preset="huge", seed=0)
+    for small_or_large in (env, DotEnv(size=16)):  # a typo is refused at any image size
+        with pytest.raises(ValueError, match="variant"):
+            PCCAgent(small_or_large, preset="huge", seed=0)

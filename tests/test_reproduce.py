@@ -566,6 +566,7 @@ def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
 
 
 def test_grid_has_a_no_action_floor_per_env_and_noise_level():
+    from benchmarks import reproduce
     from benchmarks.presets import REPRODUCE_PRESETS
     from benchmarks.reproduce import NO_ACTION, expand_grid
 
@@ -576,6 +577,15 @@ def test_grid_has_a_no_action_floor_per_env_and_noise_level():
     assert not any(r.method == NO_ACTION for r in expand_grid(preset, include_oracle=False))
     only_floor = expand_grid(preset, include_oracle=False, include_floor=True)
     assert {r.method for r in only_floor} == {NO_ACTION, "pcc"}
+    # The command line: --no-oracle drops both references unless --floor brings the floor back.
+    parse = reproduce.build_parser().parse_args
+    for flags, oracle, floor in (([], True, True), (["--no-oracle"], False, False),
+                                 (["--no-oracle", "--floor"], False, True),
+                                 (["--no-floor"], True, False)):
+        args = parse(flags)
+        methods = {r.method for r in expand_grid(preset, include_oracle=not args.no_oracle,
+                                                 include_floor=args.floor)}
+        assert ("oracle" in methods, NO_ACTION in methods) == (oracle, floor), flags
 
 
 def test_no_action_run_scores_the_starts_inside_the_goal_and_is_skipped_once_done(tmp_path):
@@ -587,7 +597,7 @@ def test_no_action_run_scores_the_starts_inside_the_goal_and_is_skipped_once_don
     record = execute_run(spec, tmp_path, str(tmp_path / "data"))
     assert record["train_seconds"] == 0.0 and record["config"] == {"no_action": True}
     assert record["percentages"][0] == 0.0 and record["percentages"][1] > 0.0
-    assert not (tmp_path / "data").exists()  # no data set, no model
+    assert not (tmp_path / "data").exists() and not (tmp_path / "checkpoints").exists()
     assert execute_run(spec, tmp_path, str(tmp_path / "data")).get("skipped") is True
     # The floor is a column of every row on the same tasks, beside the oracle's ceiling.
     model = {"spec": {**dataclasses.asdict(spec), "method": "pcc", "preset": "other"},

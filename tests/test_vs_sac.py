@@ -30,9 +30,9 @@ def test_vs_sac_tiny_budget(tmp_path):
     oracle = summary["model_based"]["oracle (vs_sac)"]
     assert oracle["n_tasks"] == 1 and 0.0 <= oracle["mean"] <= 100.0
     # The floor too: a Planar start is far from the goal, so zero actions never reach it.
-    floor = summary["model_based"]["no action (vs_sac)"]
+    floor = summary["model_based"]["no-action (vs_sac)"]
     assert floor["method"] == vs_sac.NO_ACTION and floor["n_tasks"] == 1 and floor["mean"] == 0.0
-    assert "| no action (vs_sac) | - (zero actions) | 0.0 ± n/a |" in (
+    assert "| no-action (vs_sac) | - (zero actions) | 0.0 ± n/a |" in (
         out / "Planar-v0.md").read_text()
     # Finished runs are reused, not retrained.
     record = vs_sac.sac_run_path(out, "pcc/Planar-v0", "image", 120, 0, "sparse")
@@ -290,4 +290,4 @@ def test_floor_of_the_reproduction_runs_is_used_not_measured_again(tmp_path, mon
     monkeypatch.setattr(vs_sac, "zero_action_percentages", lambda *args: pytest.fail("re-run"))
     points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])["model_based"]
     assert points["no-action (paper)"]["mean"] == 20.0
-    assert "no action (vs_sac)" not in points
+    assert "no-action (vs_sac)" not in points
