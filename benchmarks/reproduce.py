@@ -1195,7 +1195,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--patience", type=int,
         help="Override the early-stopping patience (epochs without validation improvement).",
     )
-    parser.add_argument("--noise", type=float, nargs="+", help="Override the noise levels.")
+    noise = parser.add_mutually_exclusive_group()
+    noise.add_argument(
+        "--noise", type=_non_negative_float, nargs="+", metavar="STD",
+        help="Override the process-noise levels, as standard deviations (0: deterministic).",
+    )
+    noise.add_argument(
+        "--noise-variance", type=_non_negative_float, nargs="+", metavar="VAR",
+        help="Override the process-noise levels, as variances, the way the paper's Table 3 "
+        "labels them: '--noise-variance 2' is Planar_2 (standard deviation sqrt(2)).",
+    )
     parser.add_argument("--no-oracle", action="store_true",
                         help="Skip the oracle ceiling (and the floor, unless --floor).")
     parser.add_argument("--no-floor", dest="floor", action="store_false", default=None,
@@ -1267,10 +1276,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.patience < 0:
                 raise SystemExit(f"--patience must be >= 0, got {args.patience}.")
             changes["patience"] = args.patience
-        if args.noise:
-            if min(args.noise) < 0:
-                raise SystemExit(f"--noise levels must be >= 0, got {args.noise}.")
-            changes["noise_levels"] = tuple(args.noise)
+        noise_stds = args.noise or [variance**0.5 for variance in args.noise_variance or ()]
+        if noise_stds:
+            changes["noise_levels"] = tuple(noise_stds)
             changes["env_noise_levels"] = {}
         preset = preset.override(**changes)
         runs = expand_grid(preset, include_oracle=not args.no_oracle, include_floor=args.floor)

@@ -500,7 +500,9 @@ def test_oracle_record_of_other_oracle_settings_is_stale(tmp_path):
     [(["--methods", "pcc", "ppo"], "invalid choice: 'ppo'"),
      (["--envs", "pcc/Nope-v0"], "invalid choice: 'pcc/Nope-v0'"),
      (["--num-tasks", "0"], "must be at least 1"),
-     (["--noise", "-1"], "--noise levels must be >= 0"),
+     (["--noise", "-1"], "must be >= 0, got -1"),
+     (["--noise-variance", "-2"], "must be >= 0, got -2"),
+     (["--noise", "1", "--noise-variance", "2"], "not allowed with argument --noise"),
      (["--seeds", "3", "1000"], "--seeds must be below 1000"),
      (["--ray-gpus-per-task", "-1"], "must be >= 0")],
 )
@@ -511,6 +513,21 @@ def test_bad_command_line_is_refused_before_any_run(tmp_path, capsys, args, mess
         main([*args, "--results-dir", str(tmp_path)])
     assert message in capsys.readouterr().err + str(exit_info.value)
     assert not (tmp_path / "runs").exists()
+
+
+def test_noise_variance_names_the_same_runs_as_the_presets_table3_levels(tmp_path, capsys):
+    from benchmarks.reproduce import main
+
+    def status(*noise_args):
+        main(["--preset", "paper-noisy", "--envs", "pcc/Planar-v0", "--methods", "pcc",
+              "--num-models", "1", "--no-oracle", *noise_args, "--status",
+              "--results-dir", str(tmp_path)])
+        return capsys.readouterr().out
+
+    # Table 3's Planar_2 is variance 2: the preset's own level, standard deviation sqrt(2).
+    assert "noise=1.4142135623730951 seed=0" in status()
+    assert "noise=1.4142135623730951 seed=0" in status("--noise-variance", "2")
+    assert "noise=2.0 seed=0" in status("--noise", "2")
 
 
 def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
