@@ -1284,7 +1284,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         runs = expand_grid(preset, include_oracle=not args.no_oracle, include_floor=args.floor)
         if args.status:
             print("\n".join(training_progress(results_dir, run) for run in runs))
-            return 0
         pending = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
         cost = estimate_cost(pending, load_records(results_dir) if pending else ())
         workers = max(1, args.workers)
@@ -1295,6 +1294,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"at most {cost.upper_seconds / 3600 / workers:.1f} h if every model trains to its "
             "epoch cap; CNN 'paper' models want a GPU)."
         )
+        if args.status:
+            return 0
         if preset.name != args.preset:
             print(f"The overrides change what the runs compute: their files and rows are "
                   f"labelled {preset.name!r}.")

@@ -525,7 +525,11 @@ def test_noise_variance_names_the_same_runs_as_the_presets_table3_levels(tmp_pat
         return capsys.readouterr().out
 
     # Table 3's Planar_2 is variance 2: the preset's own level, standard deviation sqrt(2).
-    assert "noise=1.4142135623730951 seed=0" in status()
+    plain = status()
+    assert "noise=1.4142135623730951 seed=0" in plain
+    # --status also says what the rest of the grid costs, and starts nothing.
+    assert "2 runs, 2 to run, estimated" in plain
+    assert not (tmp_path / "runs").exists()
     assert "noise=1.4142135623730951 seed=0" in status("--noise-variance", "2")
     assert "noise=2.0 seed=0" in status("--noise", "2")
 
