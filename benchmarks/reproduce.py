@@ -1113,7 +1113,8 @@ def estimate_cost(
     The expected figure uses, where there are any, the median time (training plus control)
     of ``finished`` run records of the same kind (env, method, variant, data size, epoch cap,
     patience), else of the other methods' models of that kind: early stopping usually ends a
-    run long before the cap.
+    run long before the cap. The upper bound of a run is never below the slowest finished
+    run of its kind.
     """
     measured: dict[tuple[str, str, str], float] = {}
     speed_file = Path(__file__).resolve().parent / "results" / "train_speed.json"
@@ -1135,15 +1136,18 @@ def estimate_cost(
     from_records = 0
     for spec in runs:
         cap = _cap_seconds(spec, measured)
-        upper += cap
         seen = observed.get(_cost_key(spec))
         if not seen and spec.method not in REFERENCE_METHODS:
             seen = observed.get(_cost_key(spec, with_method=False))
         if seen:
             expected += float(np.median(seen))
+            # A finished run that took longer than the cap's estimate (a slower or busier
+            # machine, control time) raises the bound: it must not read below the estimate.
+            upper += max(cap, max(seen))
             from_records += 1
         else:
             expected += cap
+            upper += cap
     return CostEstimate(expected, upper, from_records)
 
 
