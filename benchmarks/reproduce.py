@@ -843,9 +843,14 @@ def _models_cell(row: dict[str, Any]) -> str:
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
-    """The summary as a Markdown table, our numbers beside the paper's."""
+    """The summary as a Markdown table, our numbers beside the paper's.
+
+    The noise column gives the process-noise variance, as the paper's Table 3 subscripts do
+    (``summary.json`` keeps the standard deviation, ``noise_std``).
+    """
     lines = [
-        "| env | method | noise | preset (variant) | models x tasks | ours: all | paper: all "
+        "| env | method | noise variance | preset (variant) | models x tasks | ours: all "
+        "| paper: all "
         "| ours: top-1 | paper: top-1 | IQM [95% CI] | oracle | no action |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -855,7 +860,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
         oracle, floor = ("-" if r.get(key) is None else f"{r[key]:.1f}"
                          for key in ("oracle_mean", "floor_mean"))
         lines.append(
-            f"| {r['env']} | {r['method']} | {r['noise_std']:g} | {r['preset']} "
+            f"| {r['env']} | {r['method']} | {r['noise_std'] ** 2:g} | {r['preset']} "
             f"({r['model_variant']}) | {_models_cell(r)} "
             f"| {_fmt((r['mean_all'], r['se_all']))} | {_fmt(r['paper_all'])} "
             f"| {_fmt((r['mean_top1'], r['se_top1']))} | {_fmt(r['paper_top1'])} | {iqm} "
@@ -1045,7 +1050,9 @@ def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
     rows = [r for r in rows if r["method"] not in REFERENCE_METHODS]
     if not rows:
         return
-    labels = [f"{r['env'].split('/')[1]}\n{r['method']}\n{r['preset']}" for r in rows]
+    labels = [f"{r['env'].split('/')[1]}\n{r['method']}\n{r['preset']}"
+              + (f"\nnoise variance {r['noise_std'] ** 2:g}" if r["noise_std"] else "")
+              for r in rows]
     x = np.arange(len(rows))
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(rows)), 4))
     ax.bar(

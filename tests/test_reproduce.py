@@ -633,4 +633,7 @@ def test_no_action_run_scores_the_starts_inside_the_goal_and_is_skipped_once_don
     assert pcc["floor_mean"] == np.mean(record["percentages"]) and pcc["oracle_mean"] is None
     table = markdown_table(rows)
     assert "| oracle | no action |" in table
+    # Noise is shown as the paper's Table 3 shows it, a variance: std sqrt(2) reads 2.
+    noisy = markdown_table([{**pcc, "noise_std": 2.0**0.5}])
+    assert "| noise variance |" in noisy and "| pcc | 2 |" in noisy
     assert f"| - | {pcc['floor_mean']:.1f} |" in table
