@@ -842,6 +842,11 @@ def _models_cell(row: dict[str, Any]) -> str:
     return f"{row['n_models']} x {row['n_tasks']}"
 
 
+def _noise_variance(row: dict[str, Any]) -> str:
+    """A row's process-noise variance as Table 3 writes it (rows keep the std, ``noise_std``)."""
+    return f"{row['noise_std'] ** 2:g}"
+
+
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The summary as a Markdown table, our numbers beside the paper's.
 
@@ -860,7 +865,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
         oracle, floor = ("-" if r.get(key) is None else f"{r[key]:.1f}"
                          for key in ("oracle_mean", "floor_mean"))
         lines.append(
-            f"| {r['env']} | {r['method']} | {r['noise_std'] ** 2:g} | {r['preset']} "
+            f"| {r['env']} | {r['method']} | {_noise_variance(r)} | {r['preset']} "
             f"({r['model_variant']}) | {_models_cell(r)} "
             f"| {_fmt((r['mean_all'], r['se_all']))} | {_fmt(r['paper_all'])} "
             f"| {_fmt((r['mean_top1'], r['se_top1']))} | {_fmt(r['paper_top1'])} | {iqm} "
@@ -1051,7 +1056,7 @@ def _bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
     if not rows:
         return
     labels = [f"{r['env'].split('/')[1]}\n{r['method']}\n{r['preset']}"
-              + (f"\nnoise variance {r['noise_std'] ** 2:g}" if r["noise_std"] else "")
+              + (f"\nnoise variance {_noise_variance(r)}" if r["noise_std"] else "")
               for r in rows]
     x = np.arange(len(rows))
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(rows)), 4))
