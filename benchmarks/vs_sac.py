@@ -14,7 +14,9 @@ Every (env, policy, reward, budget, seed) run writes one JSON file,
 ``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json``. Finished runs are
 skipped, and a run cut short (Ctrl-C, a crash, the end of a session) continues from its
 training state, saved beside the record every ``--save-every`` steps and after every
-evaluation (``seed<seed>.state.pt``, see :mod:`benchmarks.sac_state`). Runs with different
+evaluation (``seed<seed>.state.pt``, see :mod:`benchmarks.sac_state`). A record holds the
+learning curve and ``policy_sha256``, the digest of the trained weights: a rerun of the same
+command is checked bit for bit with it. Runs with different
 budgets are different agents (SAC's ``learning_starts`` and buffer depend on the budget), so
 each budget has its own learning curve in the outputs.
 
@@ -154,6 +156,24 @@ def sac_run_path(
     )
 
 
+def policy_digest(model: Any) -> str:
+    """SHA-256 of a trained SB3 model's weights (policy state dict and entropy coefficient).
+
+    Written into each run record, so that a rerun of the same command can be checked to
+    reproduce the training bit for bit, not only its evaluation percentages.
+    """
+    import hashlib
+
+    digest = hashlib.sha256()
+    tensors = dict(model.policy.state_dict())
+    if getattr(model, "log_ent_coef", None) is not None:
+        tensors["log_ent_coef"] = model.log_ent_coef
+    for name in sorted(tensors):
+        digest.update(name.encode())
+        digest.update(tensors[name].detach().cpu().contiguous().numpy().tobytes())
+    return digest.hexdigest()
+
+
 def run_sac(
     env_id: str,
     observation: str,
@@ -284,6 +304,7 @@ def run_sac(
         "resumed_at_steps": resumed_at,
         "curve": curve,
         "task_seeds": list(task_seed_list),
+        "policy_sha256": policy_digest(model),
         "torch_threads": torch.get_num_threads(),
         "machine": platform.platform(),
         "command": " ".join(sys.argv),

@@ -210,6 +210,18 @@ def test_sac_run_cut_short_continues_from_its_state(tmp_path, monkeypatch):
     assert _tiny_state_run(tmp_path) == record and not state_file.exists()
 
 
+def test_evaluations_do_not_change_the_training(tmp_path):
+    """The same seed trains the same weights whatever steps it is evaluated at."""
+    def digest(checkpoints, seed=0, where="a"):
+        return vs_sac.run_sac("pcc/Planar-v0", "state", seed, 120, checkpoints, [7], 500,
+                              tmp_path / where, "sparse")["policy_sha256"]
+
+    reference = digest([])
+    assert digest([30, 90], where="b") == reference
+    assert digest([60], where="c") == reference
+    assert digest([], seed=1, where="d") != reference
+
+
 def test_sac_state_restores_weights_buffer_and_counters(tmp_path):
     from stable_baselines3 import SAC
 
