@@ -273,6 +273,9 @@ def run_sac(
                         "mean": ev.mean,
                         "se": ev.standard_error,
                         "eval_seconds": time.perf_counter() - eval_start,
+                        # The weights evaluated here: two runs of one seed that differ in
+                        # budget or checkpoints can be compared step for step.
+                        "policy_sha256": policy_digest(self.model),
                     }
                 )
                 bar.write(

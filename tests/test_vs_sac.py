@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from benchmarks import sac_state, vs_sac
+from pcc_agent.agent import sb3_logger
 
 
 def test_vs_sac_tiny_budget(tmp_path):
@@ -212,14 +213,20 @@ def test_sac_run_cut_short_continues_from_its_state(tmp_path, monkeypatch):
 
 def test_evaluations_do_not_change_the_training(tmp_path):
     """The same seed trains the same weights whatever steps it is evaluated at."""
-    def digest(checkpoints, seed=0, where="a"):
+    def run(checkpoints, seed=0, where="a"):
         return vs_sac.run_sac("pcc/Planar-v0", "state", seed, 120, checkpoints, [7], 500,
-                              tmp_path / where, "sparse")["policy_sha256"]
+                              tmp_path / where, "sparse")
 
-    reference = digest([])
-    assert digest([30, 90], where="b") == reference
-    assert digest([60], where="c") == reference
-    assert digest([], seed=1, where="d") != reference
+    reference = run([])["policy_sha256"]
+    evaluated_twice = run([30, 90], where="b")
+    evaluated_once = run([90], where="c")
+    assert evaluated_twice["policy_sha256"] == evaluated_once["policy_sha256"] == reference
+    assert run([], seed=1, where="d")["policy_sha256"] != reference
+    # Each evaluation records the weights it evaluated: the same at the same step.
+    at_90 = [[p["policy_sha256"] for p in r["curve"] if p["env_steps"] == 90]
+             for r in (evaluated_twice, evaluated_once)]
+    assert at_90[0] == at_90[1] and len(at_90[0]) == 1
+    assert len({p["policy_sha256"] for p in evaluated_twice["curve"]}) == 3  # 30, 90, 120
 
 
 def test_sac_state_restores_weights_buffer_and_counters(tmp_path):
@@ -227,6 +234,7 @@ def test_sac_state_restores_weights_buffer_and_counters(tmp_path):
 
     env = vs_sac.make_env("pcc/Planar-v0", "state", "sparse")
     model = SAC("MlpPolicy", env, buffer_size=200, learning_starts=10, seed=0, device="cpu")
+    model.set_logger(sb3_logger(None, []))  # SB3's default leaves an empty temp dir per call
     model.learn(total_timesteps=50)
     settings = {"seed": 0, "steps": 100}
     path = tmp_path / "run.state.pt"
