@@ -106,6 +106,21 @@ def _versions() -> dict[str, str]:
     }
 
 
+def machine_info() -> dict[str, Any]:
+    """The host, and the SIMD kernels torch picked on it.
+
+    AVX2 and AVX-512 kernels round differently, so bit-identical reruns are only expected
+    on hosts with the same capability.
+    """
+    import torch
+
+    return {
+        "platform": platform.platform(),
+        "cpu_count": os.cpu_count(),
+        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
+    }
+
+
 def _write_json_atomic(path: Path, payload: Any) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + f".{os.getpid()}.tmp")
@@ -346,7 +361,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         "format": RESULT_FORMAT,
         "spec": asdict(spec),
         "versions": _versions(),
-        "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count()},
+        "machine": machine_info(),
         "command": " ".join(sys.argv),
     }
     start = time.perf_counter()

@@ -63,6 +63,7 @@ from benchmarks.reproduce import (
     ORACLE,
     _positive_int,
     _save_figure_atomic,
+    _versions,
     _write_json_atomic,
     _write_text_atomic,
     is_restart_training,
@@ -310,6 +311,8 @@ def run_sac(
         "policy_sha256": policy_digest(model),
         "torch_threads": torch.get_num_threads(),
         "machine": platform.platform(),
+        "versions": _versions(),
+        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
         "command": " ".join(sys.argv),
     }
     _write_json_atomic(path, record)

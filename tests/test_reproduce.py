@@ -76,6 +76,7 @@ def test_finished_run_is_skipped_and_partial_run_redone(tmp_path):
     path = tmp_path / spec.relative_path
     assert record["status"] == "done" and path.exists()
     assert len(record["percentages"]) == 1 and len(record["tasks"][0]["states"]) > 0
+    assert record["machine"]["torch_cpu_capability"]  # which kernels made the numbers
     again = execute_run(spec, tmp_path, str(tmp_path / "data"))
     assert again.get("skipped") is True
     # A run killed mid-way leaves at most a truncated or unfinished file: it is redone.
