@@ -107,17 +107,24 @@ def _versions() -> dict[str, str]:
 
 
 def machine_info() -> dict[str, Any]:
-    """The host, and the SIMD kernels torch picked on it.
+    """The host, the SIMD kernels torch picked on it and the CPU's SIMD features.
 
-    AVX2 and AVX-512 kernels round differently, so bit-identical reruns are only expected
-    on hosts with the same capability.
+    Kernels for different instruction sets round differently (oneDNN's convolutions limited
+    to AVX2 train other SAC weights than its AVX-512 ones), so bit-identical reruns are only
+    expected on hosts with the same features.
     """
     import torch
 
+    try:
+        cpuinfo = Path("/proc/cpuinfo").read_text().split()
+    except OSError:  # not Linux
+        cpuinfo = []
+    simd = sorted({flag for flag in cpuinfo if flag.startswith(("avx", "amx", "fma"))})
     return {
         "platform": platform.platform(),
         "cpu_count": os.cpu_count(),
         "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        "simd_flags": simd,
     }
 
 

@@ -45,7 +45,6 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import sys
 import time
 from collections.abc import Sequence
@@ -68,6 +67,7 @@ from benchmarks.reproduce import (
     _write_text_atomic,
     is_restart_training,
     load_records,
+    machine_info,
     select_restarts,
 )
 
@@ -310,9 +310,8 @@ def run_sac(
         "task_seeds": list(task_seed_list),
         "policy_sha256": policy_digest(model),
         "torch_threads": torch.get_num_threads(),
-        "machine": platform.platform(),
+        "machine": machine_info(),
         "versions": _versions(),
-        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
         "command": " ".join(sys.argv),
     }
     _write_json_atomic(path, record)

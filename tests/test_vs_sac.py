@@ -222,7 +222,8 @@ def test_evaluations_do_not_change_the_training(tmp_path):
     evaluated_once = run([90], where="c")
     assert evaluated_twice["policy_sha256"] == evaluated_once["policy_sha256"] == reference
     assert run([], seed=1, where="d")["policy_sha256"] != reference
-    assert evaluated_once["torch_cpu_capability"] and evaluated_once["versions"]["torch"]
+    assert evaluated_once["machine"]["torch_cpu_capability"]
+    assert evaluated_once["versions"]["torch"]
     # Each evaluation records the weights it evaluated: the same at the same step.
     at_90 = [[p["policy_sha256"] for p in r["curve"] if p["env_steps"] == 90]
              for r in (evaluated_twice, evaluated_once)]
