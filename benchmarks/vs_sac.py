@@ -15,8 +15,9 @@ Every (env, policy, reward, budget, seed) run writes one JSON file,
 skipped, and a run cut short (Ctrl-C, a crash, the end of a session) continues from its
 training state, saved beside the record every ``--save-every`` steps and after every
 evaluation (``seed<seed>.state.pt``, see :mod:`benchmarks.sac_state`). A record holds the
-learning curve and ``policy_sha256``, the digest of the trained weights: a rerun of the same
-command is checked bit for bit with it. Runs with different
+learning curve and ``policy_sha256``, the digest of the trained weights (each curve point has
+the digest of the weights it evaluated): a rerun of the same command on a host with the same
+SIMD features (``machine.simd_flags``) is checked bit for bit with it. Runs with different
 budgets are different agents (SAC's ``learning_starts`` and buffer depend on the budget), so
 each budget has its own learning curve in the outputs.
 
@@ -161,7 +162,8 @@ def policy_digest(model: Any) -> str:
     """SHA-256 of a trained SB3 model's weights (policy state dict and entropy coefficient).
 
     Written into each run record, so that a rerun of the same command can be checked to
-    reproduce the training bit for bit, not only its evaluation percentages.
+    reproduce the training bit for bit, not only its evaluation percentages (on hosts with
+    the same SIMD features: other kernels round differently).
     """
     import hashlib
 
