@@ -15,11 +15,12 @@ Every (env, policy, reward, budget, seed) run writes one JSON file,
 skipped, and a run cut short (Ctrl-C, a crash, the end of a session) continues from its
 training state, saved beside the record every ``--save-every`` steps and after every
 evaluation (``seed<seed>.state.pt``, see :mod:`benchmarks.sac_state`). A record holds the
-learning curve and ``policy_sha256``, the digest of the trained weights (each curve point has
-the digest of the weights it evaluated): a rerun of the same command on a host with the same
-SIMD features (``machine.simd_flags``) is checked bit for bit with it. Runs with different
-budgets are different agents (SAC's ``learning_starts`` and buffer depend on the budget), so
-each budget has its own learning curve in the outputs.
+learning curve, the true-state trajectory of every task at the last evaluation (``tasks``, as
+in the reproduction records) and ``policy_sha256``, the digest of the trained weights (each
+curve point has the digest of the weights it evaluated): a rerun of the same command on a
+host with the same SIMD features (``machine.simd_flags``) is checked bit for bit with it.
+Runs with different budgets are different agents (SAC's ``learning_starts`` and buffer depend
+on the budget), so each budget has its own learning curve in the outputs.
 
 Reward: SAC learns from the env's reward, the model-based methods from none (their planner
 has the paper's quadratic latent cost). ``--reward sparse`` (default) pays 1 per step in the
@@ -252,6 +253,7 @@ def run_sac(
                desc=f"SAC {observation} seed {seed}")
     start = time.perf_counter()
     last_saved = steps_done
+    final_tasks: list[dict[str, Any]] = []  # the last evaluation's tasks, with trajectories
 
     class EvalAndSave(BaseCallback):
         # Called after each env step, before its transition is stored and trained on: the
@@ -263,12 +265,15 @@ def run_sac(
                 wanted.pop(0)
                 evaluated = True
                 eval_start = time.perf_counter()
+                final = self.num_timesteps >= steps
                 ev = evaluate_control(
                     lambda e: make_policy_view(self.model, e, observation),
                     env_id,
                     task_seed_list,
-                    record_states=False,
+                    record_states=final,
                 )
+                if final:  # where the trained agent takes each task, as reproduce keeps
+                    final_tasks[:] = [task.to_dict() for task in ev.tasks]
                 curve.append(
                     {
                         "env_steps": self.num_timesteps,
@@ -310,6 +315,7 @@ def run_sac(
         "resumed_at_steps": resumed_at,
         "curve": curve,
         "task_seeds": list(task_seed_list),
+        "tasks": final_tasks,
         "policy_sha256": policy_digest(model),
         "torch_threads": torch.get_num_threads(),
         "machine": machine_info(),

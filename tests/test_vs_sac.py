@@ -206,6 +206,11 @@ def test_sac_run_cut_short_continues_from_its_state(tmp_path, monkeypatch):
     assert record["curve"][0] == saved["curve"][0]
     assert record["train_seconds"] >= saved["train_seconds"]
     assert record_path.exists() and not state_file.exists()
+    # The last evaluation keeps each task's true-state trajectory, as the reproduction does.
+    (task,) = record["tasks"]
+    assert task["seed"] == 7 and task["percent_in_goal"] == record["curve"][-1]["mean"]
+    assert len(task["states"]) == task["steps"] == 40  # Planar's episode: 40 steps
+    assert all(len(state) == 2 for state in task["states"])  # Planar's state: (x, y)
     # A state left by a crash between writing the record and removing the state goes too.
     state_file.write_bytes(b"left over")
     assert _tiny_state_run(tmp_path) == record and not state_file.exists()
