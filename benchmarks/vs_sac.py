@@ -14,7 +14,11 @@ Every (env, policy, reward, budget, seed) run writes one JSON file,
 ``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json``. Finished runs are
 skipped, and a run cut short (Ctrl-C, a crash, the end of a session) continues from its
 training state, saved beside the record every ``--save-every`` steps and after every
-evaluation (``seed<seed>.state.pt``, see :mod:`benchmarks.sac_state`). A record holds the
+evaluation (``seed<seed>.state.pt``, see :mod:`benchmarks.sac_state`). Until the run ends, its
+record file holds the curve so far with ``"status": "partial"``, never counted in the means:
+those points can be committed, whereas the state file (gigabytes for images) stays on the
+machine, and a run started afresh over them checks that it reaches the same weights at the
+same steps (``earlier_sitting_sha256_match``). A finished record holds the
 learning curve, the true-state trajectory of every task at the last evaluation (``tasks``, as
 in the reproduction records) and ``policy_sha256``, the digest of the trained weights (each
 curve point has the digest of the weights it evaluated): a rerun of the same command on a
@@ -237,6 +241,11 @@ def run_sac(
     model.set_logger(sb3_logger(None, []))  # SB3's default makes an empty temp dir per run
     state_file = sac_state.state_path(path)
     state = sac_state.load_state(state_file, settings)
+    earlier = _comparable_partial_points(_read_record(path), settings)
+    if state is None and earlier:
+        print(f"{path} holds a partial run of an earlier sitting ({len(earlier)} evaluations) "
+              "but no training state is left: the run starts afresh, and its weights are "
+              "checked against the earlier sitting's at those steps.")
     curve: list[dict[str, Any]] = []
     earlier_seconds, resumed_at, steps_done = 0.0, [], 0
     if state is not None:
@@ -290,6 +299,23 @@ def run_sac(
                     f"  {env_id} SAC({observation}) seed {seed} @ {self.num_timesteps} steps: "
                     f"{ev.mean:.1f}% in goal"
                 )
+                before = earlier.get(self.num_timesteps) if not resumed_at else None
+                if before is not None:  # this sitting retrained the same steps from scratch
+                    same = before == curve[-1]["policy_sha256"]
+                    curve[-1]["earlier_sitting_sha256_match"] = same
+                    bar.write("    the same weights as the earlier sitting" if same else
+                              "    OTHER weights than the earlier sitting at this step (other "
+                              "kernels? see machine.simd_flags of both)")
+                if not final:  # kept in git even when the session's state file is lost
+                    _write_json_atomic(path, {
+                        "format": FORMAT, "status": "partial", "env_id": env_id,
+                        "observation": observation, "reward": reward, "seed": seed,
+                        "steps": steps, "steps_done": self.num_timesteps,
+                        "settings": settings, "curve": curve, "resumed_at_steps": resumed_at,
+                        "train_seconds": earlier_seconds + time.perf_counter() - start,
+                        "task_seeds": list(task_seed_list), "machine": machine_info(),
+                        "versions": _versions(), "command": " ".join(sys.argv),
+                    })
             nonlocal last_saved
             processed = self.num_timesteps - 1
             if wanted and (evaluated or processed - last_saved >= save_every):
@@ -325,6 +351,20 @@ def run_sac(
     _write_json_atomic(path, record)
     state_file.unlink(missing_ok=True)
     return record
+
+
+def _comparable_partial_points(record: dict[str, Any] | None,
+                               settings: dict[str, Any]) -> dict[int, str]:
+    """Weights' digests, by env step, of an earlier sitting's partial record of this run.
+
+    Only the points the earlier sitting trained without a resume before them: a run started
+    afresh must reach exactly these weights there (on a host with the same SIMD features).
+    """
+    if record is None or record.get("status") != "partial" or record.get("settings") != settings:
+        return {}
+    first_resume = min(record.get("resumed_at_steps") or [float("inf")])
+    return {int(p["env_steps"]): p["policy_sha256"] for p in record.get("curve", [])
+            if p["env_steps"] <= first_resume and "policy_sha256" in p}
 
 
 class _StatePolicy:
@@ -409,17 +449,24 @@ def summarize(
         run_dir.glob("sac_*/budget[0-9]*") if run_dir.exists() else [],
         key=lambda d: (d.parent.name, int(d.name.removeprefix("budget"))),
     )
+    partial: list[dict[str, Any]] = []
     for sub in budget_dirs:
         records = [_read_record(p) for p in sorted(sub.glob("seed*.json"))]
-        records = [rec for rec in records
-                   if rec is not None and rec.get("status") == "done" and same_tasks(rec)]
+        records = [rec for rec in records if rec is not None and same_tasks(rec)]
+        key = f"{sub.parent.name} ({sub.name.removeprefix('budget')} steps)"
+        partial.extend(
+            {"curve": key, "seed": rec["seed"], "steps_done": rec["steps_done"],
+             "points": [{"env_steps": p["env_steps"], "mean": p["mean"]} for p in rec["curve"]]}
+            for rec in records if rec.get("status") == "partial"
+        )
+        records = [rec for rec in records if rec.get("status") == "done"]
         if not records:
             continue
         points: dict[int, list[float]] = {}
         for rec in records:
             for point in rec["curve"]:
                 points.setdefault(point["env_steps"], []).append(point["mean"])
-        curves[f"{sub.parent.name} ({sub.name.removeprefix('budget')} steps)"] = [
+        curves[key] = [
             {
                 "env_steps": steps,
                 "mean": float(np.mean(v)),
@@ -467,7 +514,7 @@ def summarize(
     for entry in model_based.values():
         values = np.asarray(entry.pop("percentages"))
         entry.update(mean=float(values.mean()), se=standard_error(values), n_tasks=int(values.size))
-    return {"env": env_id, "sac": curves, "model_based": model_based}
+    return {"env": env_id, "sac": curves, "model_based": model_based, "partial": partial}
 
 
 def _curve_label(key: str) -> str:
@@ -507,6 +554,14 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
                 f"| {policy} | {p['env_steps']} | {format_mean_se(p['mean'], p['se'])} "
                 f"| {p['n_seeds']} seeds |"
             )
+    if summary.get("partial"):
+        lines += ["", "Runs in progress (not in the rows above; the same command continues "
+                  "them from their training state, or from scratch where it is lost):", ""]
+        lines += [
+            f"- {_curve_label(run['curve'])}, seed {run['seed']}, at {run['steps_done']:,} steps: "
+            + ", ".join(f"{p['mean']:.1f}% at {p['env_steps']:,}" for p in run["points"])
+            for run in summary["partial"]
+        ]
     _write_text_atomic(results_dir / f"{name}.md", "\n".join(lines) + "\n")
     fig, ax = plt.subplots(figsize=(9, 4.5))
     for policy, curve in summary["sac"].items():
@@ -515,6 +570,10 @@ def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
         e = np.array([np.nan if p["se"] is None else p["se"] for p in curve])
         ax.plot(x, y, marker="o", label=_curve_label(policy))
         ax.fill_between(x, y - e, y + e, alpha=0.2)
+    for run in summary.get("partial", []):  # drawn apart from the means they are not in
+        ax.plot([p["env_steps"] for p in run["points"]], [p["mean"] for p in run["points"]],
+                linestyle="--", marker=".",
+                label=f"{_curve_label(run['curve'])}, seed {run['seed']} (in progress)")
     model_based = sorted(summary["model_based"].items())
     oracles = [entry for _, entry in model_based if entry["method"] == ORACLE]
     if oracles:  # one ceiling, whatever preset evaluated it

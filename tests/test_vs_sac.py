@@ -192,7 +192,12 @@ def test_sac_run_cut_short_continues_from_its_state(tmp_path, monkeypatch):
     state_file = sac_state.state_path(record_path)
     with pytest.raises(KeyboardInterrupt):
         _tiny_state_run(tmp_path)
-    assert not record_path.exists()
+    # The record file holds the curve so far as a partial run, which never counts as done.
+    partial = json.loads(record_path.read_text())
+    assert partial["status"] == "partial" and partial["steps_done"] == 40
+    assert [p["env_steps"] for p in partial["curve"]] == [40]
+    assert vs_sac.load_finished_sac_run(record_path, 120, [40, 80, 120], [7], "sparse",
+                                        120) is None
     saved = torch.load(state_file, weights_only=True)
     # Saved after the evaluation at 40 steps (39 processed) and 30 steps later; not at the cut.
     assert saved["steps_done"] == 69
@@ -214,6 +219,50 @@ def test_sac_run_cut_short_continues_from_its_state(tmp_path, monkeypatch):
     # A state left by a crash between writing the record and removing the state goes too.
     state_file.write_bytes(b"left over")
     assert _tiny_state_run(tmp_path) == record and not state_file.exists()
+
+
+def test_partial_run_without_its_state_is_retrained_and_checked(tmp_path, monkeypatch, capsys):
+    """A session ends: the partial record stays (committed), the state file is lost."""
+    import pcc_agent.evaluation
+
+    real_evaluate = pcc_agent.evaluation.evaluate_control
+    calls = []
+
+    def evaluate_then_interrupt(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(pcc_agent.evaluation, "evaluate_control", evaluate_then_interrupt)
+    record_path = vs_sac.sac_run_path(tmp_path, "pcc/Planar-v0", "state", 120, 0, "sparse")
+    with pytest.raises(KeyboardInterrupt):
+        _tiny_state_run(tmp_path)
+    sac_state.state_path(record_path).unlink()
+    partial = json.loads(record_path.read_text())
+    summary = vs_sac.summarize("pcc/Planar-v0", tmp_path, tmp_path / "none")
+    assert summary["sac"] == {}  # a partial run is in no mean
+    assert summary["partial"] == [{"curve": "sac_state_sparse (120 steps)", "seed": 0,
+                                   "steps_done": 40, "points": [
+                                       {"env_steps": 40, "mean": partial["curve"][0]["mean"]}]}]
+    vs_sac.write_outputs(summary, tmp_path)
+    assert "seed 0, at 40 steps" in (tmp_path / "Planar-v0.md").read_text()
+
+    monkeypatch.setattr(pcc_agent.evaluation, "evaluate_control", real_evaluate)
+    record = _tiny_state_run(tmp_path)
+    assert record["status"] == "done" and record["resumed_at_steps"] == []
+    assert "starts afresh" in capsys.readouterr().out
+    # Trained again from scratch, the run reaches the earlier sitting's weights at 40 steps.
+    assert record["curve"][0]["policy_sha256"] == partial["curve"][0]["policy_sha256"]
+    assert record["curve"][0]["earlier_sitting_sha256_match"] is True
+    assert all("earlier_sitting_sha256_match" not in p for p in record["curve"][1:])
+
+    # Weights that differ from the earlier sitting's are flagged, not hidden.
+    tampered = {**partial, "curve": [{**partial["curve"][0], "policy_sha256": "0" * 64}]}
+    record_path.write_text(json.dumps(tampered))
+    rerun = _tiny_state_run(tmp_path)
+    assert rerun["curve"][0]["earlier_sitting_sha256_match"] is False
+    assert "OTHER weights" in capsys.readouterr().out
 
 
 def test_evaluations_do_not_change_the_training(tmp_path):
