@@ -73,6 +73,8 @@ class ReproducePreset:
         num_samples: Per-env data-set size overrides (default: the paper's sizes).
         max_epochs: Override of the training epoch cap (None: the env preset's).
         patience: Override of the early-stopping patience in epochs (None: the env preset's).
+        flush_denormals: Train with subnormal floats flushed to zero (None: off, as every
+            committed run; see ``pcc_agent.presets.TrainConfig.flush_denormals``).
         task_seed: Base seed of the control tasks (the same tasks for every model and method).
         model_seeds: Explicit model seeds to run (None: ``0 .. num_models - 1``).
         restarts: Trainings per model. With more than one, model ``m`` is the one of its
@@ -94,6 +96,7 @@ class ReproducePreset:
     num_samples: dict[str, int] = field(default_factory=dict)
     max_epochs: int | None = None
     patience: int | None = None
+    flush_denormals: bool | None = None
     task_seed: int = 2020
     model_seeds: tuple[int, ...] | None = None
     restarts: int = 1
@@ -121,7 +124,8 @@ class ReproducePreset:
     def override(self, **changes: Any) -> ReproducePreset:
         """A copy with command-line overrides, renamed if they change what a run computes.
 
-        Overrides of :data:`RUN_FIELDS` (tasks, task seed, data sizes, epoch cap, patience)
+        Overrides of :data:`RUN_FIELDS` (tasks, task seed, data sizes, epoch cap, patience,
+        the floating-point mode)
         make other models or other tasks than the preset's, so the copy is named
         ``"<name>+<field>=<value>,..."``: its runs get their own files and table rows and
         never mix with (or overwrite) the preset's. Grid selections (envs, methods, seeds,
@@ -154,7 +158,8 @@ class ReproducePreset:
 RESTART_SEED_STRIDE = 1000
 
 #: Preset fields that change what a run trains or evaluates (see ReproducePreset.override).
-RUN_FIELDS: tuple[str, ...] = ("num_tasks", "task_seed", "num_samples", "max_epochs", "patience")
+RUN_FIELDS: tuple[str, ...] = ("num_tasks", "task_seed", "num_samples", "max_epochs", "patience",
+                               "flush_denormals")
 
 
 def _tag_value(value: Any) -> str:

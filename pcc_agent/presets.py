@@ -211,6 +211,13 @@ class TrainConfig:
             that leaves short trainings with a collapsed latent space); 0 disables it.
         kl_scale: Current scale of those terms (set per epoch by the trainer during warm-up;
             1.0 is the paper's objective).
+        flush_denormals: Train with the CPU's flush-to-zero and denormals-are-zero modes on
+            (:func:`torch.set_flush_denormal`). Weight decay drives the weights of pixels that
+            are never lit (most of a Pendulum frame) into the subnormal range, where Intel
+            CPUs run matrix products many times slower (16x measured for Pendulum's first
+            layer). Off by default: it changes the trained weights' bits, so the committed
+            results are reproduced with it off. It applies to the training thread (the grid
+            runs one torch thread per worker).
     """
 
     lr: float = 5e-4
@@ -236,6 +243,7 @@ class TrainConfig:
     divergence_factor: float = 1e3
     warmup_epochs: int = 0
     kl_scale: float = 1.0
+    flush_denormals: bool = False
 
     def __post_init__(self) -> None:
         """Validate the values, with messages that say how to fix them."""

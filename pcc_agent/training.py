@@ -11,12 +11,14 @@ runs with the same seed, initial weights and thread count produce bitwise-identi
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import json
 import math
 import time
-from collections.abc import Callable, Mapping
+import warnings
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -379,6 +381,10 @@ class Trainer:
         Returns:
             The :class:`TrainResult`; the model holds the best-validation weights.
         """
+        with flushed_denormals(self.config.flush_denormals):
+            return self._fit(data, resume)
+
+    def _fit(self, data: Any, resume: bool) -> TrainResult:
         arrays = dataset_arrays(data)
         if tuple(arrays.obs.shape[1:]) != self.model.obs_shape:
             raise ValueError(
@@ -526,6 +532,30 @@ class Trainer:
             if key != "epoch":
                 self._logger.record(key, value)
         self._logger.dump(int(row["epoch"]))
+
+
+def denormals_flushed() -> bool:
+    """Whether this thread's CPU flushes subnormal floats to zero (FTZ/DAZ on)."""
+    return float(torch.tensor([1e-40], dtype=torch.float32).mul(1.0)) == 0.0
+
+
+@contextlib.contextmanager
+def flushed_denormals(enabled: bool = True) -> Iterator[None]:
+    """Flush subnormal floats to zero inside the block, then restore the previous mode.
+
+    Does nothing when ``enabled`` is false, or on a CPU without the modes (then it warns).
+    """
+    if not enabled:
+        yield
+        return
+    before = denormals_flushed()
+    if not torch.set_flush_denormal(True):
+        warnings.warn("This CPU cannot flush denormals to zero; training runs with them.",
+                      RuntimeWarning, stacklevel=3)
+    try:
+        yield
+    finally:
+        torch.set_flush_denormal(before)
 
 
 def train_embedding(

@@ -306,11 +306,15 @@ def test_training_overrides_reach_the_trained_model(tmp_path):
 
     long = REPRODUCE_PRESETS["paper-fast-long"].replace(envs=("pcc/Planar-v0",), methods=("pcc",))
     assert {(r.max_epochs, r.patience) for r in expand_grid(long, False)} == {(1000, 100)}
-    spec = dataclasses.replace(tiny_spec(), patience=7, max_epochs=2)
+    spec = dataclasses.replace(tiny_spec(), patience=7, max_epochs=2, flush_denormals=True)
     record = execute_run(spec, tmp_path, str(tmp_path / "data"))
     train = record["config"]["train"]
-    assert (train["patience"], train["epochs"]) == (7, 2)
+    assert (train["patience"], train["epochs"], train["flush_denormals"]) == (7, 2, True)
     assert record["spec"]["patience"] == 7
+    # A record from before the option counts as trained without it, never as this run.
+    assert load_finished_run(tmp_path / spec.relative_path, spec) is not None
+    unflushed = dataclasses.replace(spec, flush_denormals=None)
+    assert load_finished_run(tmp_path / spec.relative_path, unflushed) is None
 
 
 def test_cost_estimate_uses_finished_runs_of_the_same_kind():
@@ -458,6 +462,9 @@ def test_overrides_that_change_the_runs_rename_the_preset():
     runs = expand_grid(shorter)
     assert {r.preset for r in runs} == {shorter.name}
     assert all("paper+num_tasks=3,max_epochs=5" in str(r.relative_path) for r in runs)
+    flushed = paper.override(flush_denormals=True)
+    assert flushed.name == "paper+flush_denormals=True"
+    assert {r.flush_denormals for r in expand_grid(flushed, include_oracle=False)} == {True}
     # Table 3 runs Planar at noise variance 1 and 2, the other domains at variance 1.
     noisy = REPRODUCE_PRESETS["paper-noisy"]
     levels = {(r.env_id, r.noise_std) for r in expand_grid(noisy, include_oracle=False)}

@@ -12,7 +12,13 @@ from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_model, s
 from pcc_agent.losses import model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ModelConfig, TrainConfig
-from pcc_agent.training import dataset_arrays, resolve_device, train_embedding
+from pcc_agent.training import (
+    dataset_arrays,
+    denormals_flushed,
+    flushed_denormals,
+    resolve_device,
+    train_embedding,
+)
 
 # Forward-mode AD loads torch's jit decompositions once; torch itself warns about them.
 pytestmark = [
@@ -69,6 +75,24 @@ def test_two_seeded_runs_are_bitwise_identical():
         assert torch.equal(a, b), name
     third, _ = _train(data, config=dataclasses.replace(config, seed=1))
     assert not torch.equal(first.encoder.head.weight, third.encoder.head.weight)
+
+
+def test_flushed_denormals_is_scoped_and_reaches_the_training():
+    assert not denormals_flushed()
+    with flushed_denormals():
+        assert denormals_flushed()
+        with flushed_denormals(False):  # off means "leave the mode alone"
+            assert denormals_flushed()
+    assert not denormals_flushed()
+
+    modes = []
+    _train(planar_like(96), config=dataclasses.replace(TRAIN, flush_denormals=True),
+           epoch_callback=lambda epoch, metrics: modes.append(denormals_flushed()))
+    assert modes == [True] * TRAIN.epochs and not denormals_flushed()
+    modes.clear()
+    _train(planar_like(96), epoch_callback=lambda epoch, metrics: modes.append(
+        denormals_flushed()))
+    assert modes == [False] * TRAIN.epochs
 
 
 @pytest.mark.parametrize("method", ["e2c", "rce"])
