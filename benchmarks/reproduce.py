@@ -908,6 +908,8 @@ def _training_recipe(settings: dict[str, Any]) -> str:
         changes.append("input standardization")
     if train.get("warmup_epochs"):
         changes.append(f"{train['warmup_epochs']}-epoch KL warm-up")
+    if train.get("flush_denormals"):
+        changes.append("subnormals flushed to zero")
     recipe = "paper recipe" if not changes else "paper recipe + " + " + ".join(changes)
     if not train:
         return recipe

@@ -302,7 +302,7 @@ def test_explicit_model_seeds_select_the_grid_cells():
 
 def test_training_overrides_reach_the_trained_model(tmp_path):
     from benchmarks.presets import REPRODUCE_PRESETS
-    from benchmarks.reproduce import expand_grid
+    from benchmarks.reproduce import _training_recipe, expand_grid
 
     long = REPRODUCE_PRESETS["paper-fast-long"].replace(envs=("pcc/Planar-v0",), methods=("pcc",))
     assert {(r.max_epochs, r.patience) for r in expand_grid(long, False)} == {(1000, 100)}
@@ -310,6 +310,7 @@ def test_training_overrides_reach_the_trained_model(tmp_path):
     record = execute_run(spec, tmp_path, str(tmp_path / "data"))
     train = record["config"]["train"]
     assert (train["patience"], train["epochs"], train["flush_denormals"]) == (7, 2, True)
+    assert "subnormals flushed to zero" in _training_recipe(record["config"])
     assert record["spec"]["patience"] == 7
     # A record from before the option counts as trained without it, never as this run.
     assert load_finished_run(tmp_path / spec.relative_path, spec) is not None
