@@ -261,6 +261,16 @@ def run_sac(
     bar = tqdm(total=steps, initial=steps_done, unit="step",
                desc=f"SAC {observation} seed {seed}")
     start = time.perf_counter()
+
+    def record_fields(status: str) -> dict[str, Any]:
+        """What a partial and a finished record of this run both hold, as of now."""
+        return {
+            "format": FORMAT, "status": status, "env_id": env_id, "observation": observation,
+            "reward": reward, "seed": seed, "steps": steps,
+            "train_seconds": earlier_seconds + time.perf_counter() - start,
+            "resumed_at_steps": resumed_at, "curve": curve, "task_seeds": list(task_seed_list),
+            "machine": machine_info(), "versions": _versions(), "command": " ".join(sys.argv),
+        }
     last_saved = steps_done
     final_tasks: list[dict[str, Any]] = []  # the last evaluation's tasks, with trajectories
 
@@ -307,15 +317,9 @@ def run_sac(
                               "    OTHER weights than the earlier sitting at this step (other "
                               "kernels? see machine.simd_flags of both)")
                 if not final:  # kept in git even when the session's state file is lost
-                    _write_json_atomic(path, {
-                        "format": FORMAT, "status": "partial", "env_id": env_id,
-                        "observation": observation, "reward": reward, "seed": seed,
-                        "steps": steps, "steps_done": self.num_timesteps,
-                        "settings": settings, "curve": curve, "resumed_at_steps": resumed_at,
-                        "train_seconds": earlier_seconds + time.perf_counter() - start,
-                        "task_seeds": list(task_seed_list), "machine": machine_info(),
-                        "versions": _versions(), "command": " ".join(sys.argv),
-                    })
+                    _write_json_atomic(path, {**record_fields("partial"),
+                                              "steps_done": self.num_timesteps,
+                                              "settings": settings})
             nonlocal last_saved
             processed = self.num_timesteps - 1
             if wanted and (evaluated or processed - last_saved >= save_every):
@@ -328,25 +332,12 @@ def run_sac(
         model.learn(total_timesteps=steps - steps_done, callback=EvalAndSave(),
                     reset_num_timesteps=state is None)
     record = {
-        "format": FORMAT,
-        "status": "done",
-        "env_id": env_id,
+        **record_fields("done"),
         "policy": f"SAC {policy} ({observation})",
-        "observation": observation,
-        "reward": reward,
-        "seed": seed,
-        "steps": steps,
         "buffer_size": settings["buffer_size"],
-        "train_seconds": earlier_seconds + time.perf_counter() - start,
-        "resumed_at_steps": resumed_at,
-        "curve": curve,
-        "task_seeds": list(task_seed_list),
         "tasks": final_tasks,
         "policy_sha256": policy_digest(model),
         "torch_threads": torch.get_num_threads(),
-        "machine": machine_info(),
-        "versions": _versions(),
-        "command": " ".join(sys.argv),
     }
     _write_json_atomic(path, record)
     state_file.unlink(missing_ok=True)
