@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from pcc_agent.checkpoint import atomic_torch_save
+from pcc_agent.checkpoint import CheckpointError, atomic_torch_save, torch_load_safely
 
 STATE_FORMAT = 1
 
@@ -96,9 +96,9 @@ def load_state(path: Path, settings: dict[str, Any]) -> dict[str, Any] | None:
     try:
         # mmap: the replay buffer is read from the file as it is copied into SB3's buffer,
         # not held twice in memory (an 80x80x2 image buffer takes gigabytes).
-        state = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-    except Exception as error:  # noqa: BLE001 - any unreadable file is discarded alike
-        print(f"Discarding unreadable SAC state {path}: {error}")
+        state = torch_load_safely(path, map_location="cpu", mmap=True)
+    except (CheckpointError, OSError) as error:  # unreadable or unsafe: discarded alike
+        print(f"Discarding unreadable SAC state: {error}")
         os.unlink(path)
         return None
     if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:

@@ -18,7 +18,10 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
+import re
 import tempfile
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,7 +36,7 @@ FORMAT_VERSION = 1
 
 
 class CheckpointError(RuntimeError):
-    """A checkpoint is missing, corrupt, truncated or does not fit the requested model."""
+    """A checkpoint is missing, empty, truncated, corrupt, unsafe or does not fit the model."""
 
 
 @dataclass
@@ -143,6 +146,104 @@ def save_checkpoint(
     return Path(path)
 
 
+_REMEDY = "Re-train or restore it from a backup."
+_ZIP_MAGIC = b"PK\x03\x04"
+_PICKLE_PROTO = b"\x80"  # a pickle of protocol 2 or later (torch's legacy format) starts so
+
+
+def _check_readable(path: Path) -> None:
+    """Refuse an empty file, a truncated zip archive, or a file in neither of torch's formats.
+
+    ``torch.save`` writes a zip archive (a legacy-format file is a pickle); the archive's index
+    is at its end, so a file cut short has none.
+    """
+    size = path.stat().st_size
+    if size == 0:
+        raise CheckpointError(
+            f"Checkpoint {path} is empty (0 bytes): it was never written. {_REMEDY}"
+        )
+    with open(path, "rb") as handle:
+        head = handle.read(len(_ZIP_MAGIC))
+    if head == _ZIP_MAGIC and not zipfile.is_zipfile(path):
+        raise CheckpointError(
+            f"Checkpoint {path} is truncated ({size} bytes, the end of the archive is missing): "
+            f"it was cut short while being written or copied. {_REMEDY}"
+        )
+    if head != _ZIP_MAGIC and not head.startswith(_PICKLE_PROTO):
+        raise CheckpointError(
+            f"Checkpoint {path} is corrupt: its {size} bytes are not a file torch.save writes "
+            f"(neither a zip archive nor a pickle). {_REMEDY}"
+        )
+
+
+def _reason(error: BaseException) -> str:
+    """A one-line description of a low-level error, never empty."""
+    text = str(error).strip().splitlines()[0] if str(error).strip() else ""
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__
+
+
+def _refusal(path: Path, error: Exception) -> str:
+    """The message for a file the weights-only unpickler refused: what it holds, what to do."""
+    text = str(error)
+    named = re.search(r"GLOBAL ([\w.]+)", text)
+    opcode = re.search(r"Unsupported operand (\d+)", text)
+    if named:
+        what = f"code objects (it would call {named.group(1)}) that the loader will not execute"
+    elif opcode:
+        what = (f"pickled data the safe loader does not read (opcode {opcode.group(1)}), "
+                "possibly code objects, which the loader will not execute")
+    else:
+        what = "objects that are not plain data, possibly code objects, which the loader " \
+               "will not execute"
+    return (
+        f"Refused to load checkpoint {path}: it holds {what}. Checkpoints are read as plain "
+        "data only (tensors, numbers, strings, lists, dicts), so nothing in this file was run. "
+        "pcc_agent never writes code into a checkpoint: this file was made by another program "
+        "or altered. Use a checkpoint written by PCCAgent.save or save_checkpoint."
+    )
+
+
+def torch_load_safely(
+    path: str | os.PathLike[str], map_location: torch.device | str = "cpu", mmap: bool = False
+) -> Any:
+    """``torch.load(path, weights_only=True)`` with errors that say what is wrong with the file.
+
+    Nothing in the file is executed: a file holding code objects is refused. Torch's own
+    message for that case (which advises an unsafe reload) is not passed on.
+
+    Args:
+        path: The file.
+        map_location: Device the tensors are loaded to.
+        mmap: Map the tensors' storage from the file instead of reading it (zip format only).
+
+    Returns:
+        The loaded object (tensors and plain Python containers / numbers / strings).
+
+    Raises:
+        CheckpointError: Missing, empty, truncated or corrupt file, or a file holding code
+            objects (the message names the file and the reason).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"Checkpoint {path} does not exist (or is not a file).")
+    _check_readable(path)
+    try:
+        return torch.load(path, map_location=map_location, weights_only=True, mmap=mmap)
+    except Exception as error:  # torch raises many types for damaged archives
+        if isinstance(error, pickle.UnpicklingError) or "Weights only load failed" in str(error):
+            # torch's own message advises the unsafe reload: it must not reach the user, not
+            # even as the chained cause in the traceback.
+            raise CheckpointError(_refusal(path, error)) from None
+        if isinstance(error, EOFError) or "unexpected EOF" in str(error):
+            raise CheckpointError(
+                f"Checkpoint {path} is truncated ({path.stat().st_size} bytes, the data end "
+                f"early): it was cut short while being written or copied. {_REMEDY}"
+            ) from error
+        raise CheckpointError(
+            f"Checkpoint {path} is corrupt and cannot be read ({_reason(error)}). {_REMEDY}"
+        ) from error
+
+
 def load_checkpoint(
     path: str | os.PathLike[str], map_location: torch.device | str = "cpu"
 ) -> Checkpoint:
@@ -156,18 +257,11 @@ def load_checkpoint(
         The :class:`Checkpoint`.
 
     Raises:
-        CheckpointError: Missing, corrupt or truncated file, or not a pcc_agent checkpoint.
+        CheckpointError: Missing, empty, truncated or corrupt file; a file holding code
+            objects (refused, nothing of it is executed); or not a pcc_agent checkpoint.
     """
     path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"Checkpoint {path} does not exist (or is not a file).")
-    try:
-        payload = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as error:  # torch raises many types for damaged archives
-        raise CheckpointError(
-            f"Checkpoint {path} is corrupt or truncated and cannot be read ({error}). "
-            "Re-train or restore it from a backup."
-        ) from error
+    payload = torch_load_safely(path, map_location)
     if not isinstance(payload, dict) or payload.get("format") != FORMAT_NAME:
         raise CheckpointError(
             f"{path} is not a pcc_agent checkpoint (expected a dict with format={FORMAT_NAME!r})."
