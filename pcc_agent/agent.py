@@ -411,6 +411,44 @@ class PCCAgent:
             )
         return obs
 
+    def _check_state(self, state: Any, n: int) -> np.ndarray:
+        """The warm start ``state`` as float32 ``(n, plan_length, action_dim)``, or ValueError."""
+        warm = np.asarray(state)
+        expected = (n, self.preset.planner.plan_length, self.action_dim)
+        if not np.issubdtype(warm.dtype, np.floating):
+            raise ValueError(
+                f"predict(): state must be a float array (got dtype {warm.dtype}): pass back the "
+                "state the previous predict() call returned, or None at the start."
+            )
+        if warm.shape != expected:
+            raise ValueError(
+                f"predict(): state has shape {warm.shape}; expected {expected} (n_envs, "
+                "plan_length, action_dim) for this observation batch: pass back the state the "
+                "previous predict() call on the same envs returned, or None at the start."
+            )
+        if not np.all(np.isfinite(warm)):
+            raise ValueError("predict(): state has non-finite values (NaN or inf); pass None to "
+                             "plan from scratch.")
+        return warm.astype(np.float32, copy=False)
+
+    @staticmethod
+    def _check_episode_start(episode_start: Any, n: int) -> np.ndarray:
+        """``episode_start`` as ``(n,)`` booleans, or ValueError."""
+        starts = np.asarray(episode_start)
+        if starts.dtype != bool and not (
+            np.issubdtype(starts.dtype, np.integer) and np.isin(starts, (0, 1)).all()
+        ):
+            raise ValueError(
+                f"predict(): episode_start must be booleans (or 0/1), got {starts.dtype} values "
+                f"{starts.reshape(-1)[:4].tolist()}."
+            )
+        if starts.size != n:
+            raise ValueError(
+                f"predict(): episode_start has {starts.size} entries; expected {n}, one per "
+                "observation of the batch."
+            )
+        return starts.reshape(-1).astype(bool)
+
     def _cost(self, goal: torch.Tensor) -> QuadraticCost:
         return QuadraticCost.from_config(self.preset.planner, goal, self.action_dim)
 
@@ -426,15 +464,21 @@ class PCCAgent:
 
         Args:
             observation: One observation ``(frames, H, W)`` or a batch ``(n, frames, H, W)``.
-            state: The MPC warm start returned by the previous call (shifted plans
-                ``(n, T, action_dim)``), or None at the start.
-            episode_start: Booleans ``(n,)``: True where an episode starts (its warm start is
-                dropped and it plans from scratch).
+            state: The MPC warm start returned by the previous call (shifted plans, float
+                ``(n, T, action_dim)`` with ``T`` the planner's ``plan_length``; ``n`` is 1 for
+                one observation), or None at the start.
+            episode_start: Booleans (or 0/1) ``(n,)``: True where an episode starts (its warm
+                start is dropped and it plans from scratch).
             deterministic: Unused: the MPC policy is deterministic given the seed.
 
         Returns:
             ``(action, state)``: actions inside the action space, ``(action_dim,)`` or
             ``(n, action_dim)``, and the warm start to pass back next call.
+
+        Raises:
+            ValueError: An observation, ``state`` or ``episode_start`` of the wrong shape or
+                dtype (or a non-finite ``state``).
+            RuntimeError: No goal set yet.
         """
         obs = self._check_obs(observation)
         if self._goal_obs is None:
@@ -443,6 +487,8 @@ class PCCAgent:
         single = obs.shape == self.obs_shape
         batch = obs[None] if single else obs
         n = batch.shape[0]
+        warm_np = None if state is None else self._check_state(state, n)
+        starts = None if episode_start is None else self._check_episode_start(episode_start, n)
         self.model.eval()
         both = torch.as_tensor(np.concatenate([batch, self._goal_obs[None]]), device=self.device)
         z_all, _ = self.model.encode(both)
@@ -452,13 +498,11 @@ class PCCAgent:
         config = self.preset.planner
         fresh = np.ones(n, dtype=bool)
         warm = None
-        if state is not None:
-            warm_np = np.asarray(state, dtype=np.float32)
-            if warm_np.shape == (n, config.plan_length, self.action_dim):
-                warm = torch.as_tensor(warm_np, device=self.device)
-                fresh = np.zeros(n, dtype=bool)
-        if episode_start is not None:
-            fresh |= np.asarray(episode_start, dtype=bool).reshape(-1)[:n]
+        if warm_np is not None:
+            warm = torch.as_tensor(warm_np, device=self.device)
+            fresh = np.zeros(n, dtype=bool)
+        if starts is not None:
+            fresh |= starts
         u_plan = torch.empty(n, config.plan_length, self.action_dim, device=self.device)
         if fresh.any():
             idx = torch.as_tensor(np.flatnonzero(fresh), device=self.device)

@@ -6,10 +6,12 @@ the other signal tests; the SB3 callback timing test in ``test_agent.py``.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import traceback
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -17,8 +19,10 @@ import pcc_envs  # noqa: F401
 from pcc_agent import PCCAgent
 from pcc_agent.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from pcc_agent.model import EmbeddingModel
-from pcc_agent.presets import ModelConfig
+from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.presets import ModelConfig, get_preset
 
+ENV_ID = "pcc/Planar-v0"
 SMALL = ModelConfig(latent_dim=2, encoder_hidden=(16,), decoder_hidden=(16,),
                     transition_hidden=(8,), backward_nz=4, backward_nu=4, backward_nx=8,
                     backward_joint=8)
@@ -79,3 +83,62 @@ def test_empty_truncated_and_garbage_checkpoints_say_which(tmp_path):
         assert "()" not in message and "( " not in message, message
         assert "weights_only=False" not in _full_text(caught.value)
     assert load_checkpoint(good).config == {"method": "pcc"}
+
+
+# ------------------------------------------------------------------ predict's warm start
+@pytest.fixture(scope="module")
+def untrained_agent():
+    """An untrained agent with a goal: predict() runs, nothing is learned (fast)."""
+    preset = get_preset(ENV_ID)
+    preset = dataclasses.replace(
+        preset, model=SMALL,
+        planner=PlannerConfig(plan_length=4, iterations=1, mpc_iterations=1, num_candidates=1))
+    agent = PCCAgent(ENV_ID, preset=preset, seed=0, device="cpu")
+    obs, _ = agent.env.reset(seed=0)
+    agent.set_goal(obs)
+    return agent, obs
+
+
+def test_predict_accepts_its_own_state_back(untrained_agent):
+    agent, obs = untrained_agent
+    batch = np.stack([obs, obs])
+    _, state = agent.predict(batch)
+    assert state.shape == (2, 4, 2) and state.dtype == np.float32
+    actions, state2 = agent.predict(batch, state=state, episode_start=np.array([False, True]))
+    assert actions.shape == (2, 2) and state2.shape == state.shape
+    _, single_state = agent.predict(obs)
+    action, _ = agent.predict(obs, state=single_state, episode_start=np.array([False]))
+    assert action.shape == (2,)
+    agent.predict(obs, state=single_state.astype(np.float64))  # any float precision
+
+
+@pytest.mark.parametrize(
+    ("state", "message"),
+    [
+        (np.zeros((2, 3, 2), np.float32), r"state has shape \(2, 3, 2\); expected \(2, 4, 2\)"),
+        (np.zeros((1, 4, 2), np.float32), r"state has shape \(1, 4, 2\); expected \(2, 4, 2\)"),
+        (np.zeros((2, 4, 3), np.float32), r"state has shape \(2, 4, 3\); expected \(2, 4, 2\)"),
+        (np.zeros((4, 2), np.float32), r"state has shape \(4, 2\); expected \(2, 4, 2\)"),
+        (np.zeros((2, 4, 2), np.int64), "state must be a float array"),
+        (np.zeros((2, 4, 2), bool), "state must be a float array"),
+        (np.array("warm"), "state must be a float array"),
+        (np.full((2, 4, 2), np.nan, np.float32), "state has non-finite values"),
+    ],
+    ids=["plan-length", "batch-size", "action-dim", "unbatched", "int", "bool", "str", "nan"],
+)
+def test_predict_refuses_a_wrong_state(untrained_agent, state, message):
+    agent, obs = untrained_agent
+    with pytest.raises(ValueError, match=message):
+        agent.predict(np.stack([obs, obs]), state=state)
+
+
+def test_predict_refuses_a_wrong_episode_start(untrained_agent):
+    agent, obs = untrained_agent
+    batch = np.stack([obs, obs])
+    with pytest.raises(ValueError, match=r"episode_start has 3 entries; expected 2"):
+        agent.predict(batch, episode_start=np.array([True, False, True]))
+    with pytest.raises(ValueError, match=r"episode_start has 1 entries; expected 2"):
+        agent.predict(batch, episode_start=np.array([True]))
+    with pytest.raises(ValueError, match="episode_start must be booleans"):
+        agent.predict(batch, episode_start=np.array([0.5, 0.5]))
+    agent.predict(batch, episode_start=np.array([1, 0]))  # 0/1 flags, as SB3's envs give them
