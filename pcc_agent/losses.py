@@ -23,8 +23,8 @@ from collections.abc import Callable
 from typing import Any, NamedTuple, Protocol
 
 import torch
-from torch.func import jvp
 
+from pcc_agent._forward_ad import jvp
 from pcc_agent.distributions import (
     gaussian_entropy,
     gaussian_kl,

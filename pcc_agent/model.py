@@ -12,8 +12,9 @@ from typing import Any
 
 import torch
 from torch import nn
-from torch.func import jacrev, jvp, vmap
+from torch.func import jacrev, vmap
 
+from pcc_agent._forward_ad import jvp
 from pcc_agent.networks import TransitionOutput, build_networks, to_float_image
 from pcc_agent.presets import ModelConfig
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import subprocess
+import sys
 import traceback
 from pathlib import Path
 
@@ -22,6 +24,7 @@ from pcc_agent.model import EmbeddingModel
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.presets import ModelConfig, get_preset
 
+ROOT = Path(__file__).resolve().parents[1]
 ENV_ID = "pcc/Planar-v0"
 SMALL = ModelConfig(latent_dim=2, encoder_hidden=(16,), decoder_hidden=(16,),
                     transition_hidden=(8,), backward_nz=4, backward_nu=4, backward_nx=8,
@@ -142,3 +145,42 @@ def test_predict_refuses_a_wrong_episode_start(untrained_agent):
     with pytest.raises(ValueError, match="episode_start must be booleans"):
         agent.predict(batch, episode_start=np.array([0.5, 0.5]))
     agent.predict(batch, episode_start=np.array([1, 0]))  # 0/1 flags, as SB3's envs give them
+
+
+# ------------------------------------------------------------------ torch's own deprecation
+_JVP = ("import torch; from torch.func import jvp; "
+        "jvp(torch.tanh, (torch.ones(2),), (torch.ones(2),))")
+
+
+def _python(code: str) -> subprocess.CompletedProcess:
+    """Run ``code`` in a fresh interpreter (torch loads its jvp decompositions once per process)."""
+    return subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+
+
+def test_our_forward_mode_ad_emits_no_deprecation_warning():
+    """Curvature loss and transition JVPs run with DeprecationWarnings turned into errors."""
+    code = (
+        "import torch; from pcc_agent.losses import curvature_penalty; "
+        "from pcc_agent.model import EmbeddingModel; from pcc_agent.presets import ModelConfig; "
+        "z, u = torch.ones(3, 2), torch.ones(3, 1); "
+        "print(curvature_penalty(lambda z, u: torch.tanh(z) * u, z, u, z, u).shape); "
+        "m = EmbeddingModel((1, 40, 40), 1, ModelConfig(latent_dim=2)); "
+        "print(m.transition_jvp(z, u, z, u)[1].shape)"
+    )
+    done = _python(code)
+    assert done.returncode == 0, done.stderr
+    assert "DeprecationWarning" not in done.stderr
+
+
+def test_torch_still_warns_about_its_own_jit_script_call():
+    """Pins why ``pcc_agent._forward_ad`` silences one torch warning.
+
+    ``torch.func.jvp`` loads ``torch._decomp.decompositions_for_jvp`` on its first use, and
+    that module calls the deprecated ``torch.jit.script``: torch's code, not ours. When this
+    test fails, torch no longer does that: delete ``pcc_agent._forward_ad`` (use
+    ``torch.func.jvp`` directly) and this test.
+    """
+    done = _python(_JVP)
+    assert done.returncode != 0 and "`torch.jit.script` is" in done.stderr, done.stderr
+    assert "decompositions_for_jvp" in done.stderr, done.stderr

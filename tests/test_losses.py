@@ -22,11 +22,7 @@ from pcc_agent.losses import (
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ModelConfig, TrainConfig
 
-# Forward-mode AD loads torch's jit decompositions once; torch itself warns about them.
-pytestmark = [
-    pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated"),
-    pytest.mark.usefixtures("single_torch_thread"),
-]
+pytestmark = pytest.mark.usefixtures("single_torch_thread")
 
 SMALL = ModelConfig(latent_dim=3, encoder_hidden=(32,), decoder_hidden=(32,),
                     transition_hidden=(16, 16), backward_nz=4, backward_nu=4, backward_nx=16,

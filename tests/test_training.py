@@ -20,11 +20,7 @@ from pcc_agent.training import (
     train_embedding,
 )
 
-# Forward-mode AD loads torch's jit decompositions once; torch itself warns about them.
-pytestmark = [
-    pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated"),
-    pytest.mark.usefixtures("single_torch_thread"),
-]
+pytestmark = pytest.mark.usefixtures("single_torch_thread")
 
 SIZE = 20
 CONFIG = ModelConfig(latent_dim=2, encoder_hidden=(64,), decoder_hidden=(64,),
