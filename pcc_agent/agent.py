@@ -114,6 +114,11 @@ class PCCAgent:
             ``~/.cache/pcc_control/datasets``).
         verbose: 0 silent, 1 progress messages.
         tensorboard_log: Directory of SB3 logger output (stdout, CSV, TensorBoard if installed).
+
+    Attributes:
+        num_timesteps: Transitions learned from so far, as in SB3 (the samples trained on):
+            each training epoch, one callback step of :meth:`learn`, adds the data set size.
+            Two epochs on 5,000 transitions make 10,000.
     """
 
     def __init__(
@@ -294,13 +299,15 @@ class PCCAgent:
 
         Args:
             total_timesteps: Transitions to collect with the env's sampler (the paper's
-                uniform protocol; random-policy rollouts for a foreign env). Default: the
-                preset's data size.
+                uniform protocol; random-policy rollouts for a foreign env): the data set size.
+                Default: the preset's data size.
             callback: SB3 callback(s) or a function ``(locals, globals) -> bool``. One callback
-                step is one training epoch; returning False stops training.
+                step is one training epoch, after which ``num_timesteps`` has grown by the data
+                set size (so ``CheckpointCallback`` files and ``EvalCallback`` times differ
+                from step to step); returning False stops training.
             log_interval: Epochs between logger dumps.
             progress_bar: Show a progress bar over epochs with the loss terms.
-            reset_num_timesteps: Reset ``num_timesteps`` (the number of transitions used).
+            reset_num_timesteps: Start ``num_timesteps`` from 0 (else continue counting).
             dataset: Train on these transitions instead of collecting: a
                 ``pcc_envs.data.TransitionDataset`` or a tuple ``(obs, action, next_obs)``.
             tb_log_name: Unused, SB3 compatibility.
@@ -315,6 +322,7 @@ class PCCAgent:
         Returns:
             self.
         """
+        sb3_callback = self._convert_callback(callback)  # refuse a wrong one before any work
         if dataset is not None:
             if isinstance(dataset, tuple):
                 obs, action, next_obs = dataset
@@ -328,17 +336,22 @@ class PCCAgent:
         self._check_obs(obs[:1], single=False)
         if reset_num_timesteps:
             self.num_timesteps = 0
-        self.num_timesteps += len(obs)
+        # SB3's meaning: num_timesteps counts the transitions learned from and advances with
+        # every callback step. One step here is one epoch, one pass over the whole data set.
+        first_timestep, epoch_timesteps = self.num_timesteps, len(obs)
         if self._goal_obs is None and hasattr(self.env.unwrapped, "goal_observation"):
             self._goal_obs = self._check_obs(self.env.unwrapped.goal_observation(), single=True)
-        sb3_callback = self._init_callback(callback)
         if sb3_callback is not None:
+            sb3_callback.init_callback(self)  # type: ignore[arg-type]
             sb3_callback.on_training_start(locals(), globals())
 
         def on_epoch(epoch: int, metrics: dict[str, float]) -> bool:
+            # ``epoch`` counts the epochs of a resumed training too: the same steps as unbroken.
+            self.num_timesteps = first_timestep + epoch * epoch_timesteps
             for key, value in metrics.items():
                 self.logger.record(f"train/{key}", value)
             self.logger.record("train/epoch", epoch)
+            self.logger.record("time/total_timesteps", self.num_timesteps)
             if log_interval and epoch % log_interval == 0:
                 self.logger.dump(self.num_timesteps)
             if sb3_callback is None:
@@ -359,6 +372,7 @@ class PCCAgent:
             resume=resume,
             checkpoint_every=checkpoint_every,
         )
+        self.num_timesteps = first_timestep + self.train_result.epochs * epoch_timesteps
         if sb3_callback is not None:
             sb3_callback.on_training_end()
         if self._goal_obs is None:
@@ -370,15 +384,24 @@ class PCCAgent:
             )
         return self
 
-    def _init_callback(self, callback: Any) -> BaseCallback | None:
+    def _convert_callback(self, callback: Any) -> BaseCallback | None:
         if callback is None:
             return None
         if isinstance(callback, list):
-            callback = CallbackList(callback)
-        if not isinstance(callback, BaseCallback):
-            callback = ConvertCallback(callback)
-        callback.init_callback(self)  # type: ignore[arg-type]
-        return callback
+            callback = CallbackList([self._as_callback(c) for c in callback])
+        return self._as_callback(callback)
+
+    @staticmethod
+    def _as_callback(callback: Any) -> BaseCallback:
+        """An SB3 callback, or a function ``(locals, globals) -> bool`` wrapped as one."""
+        if isinstance(callback, BaseCallback):
+            return callback
+        if callable(callback):
+            return ConvertCallback(callback)
+        raise TypeError(
+            f"callback must be an SB3 BaseCallback, a function (locals, globals) -> bool, or a "
+            f"list of these; got {type(callback).__name__}."
+        )
 
     # ------------------------------------------------------------------ control
     def set_goal(self, goal_obs: np.ndarray) -> None:

@@ -40,7 +40,7 @@ def trained(tmp_path_factory):
 
 def test_learn_sets_goal_and_counts_timesteps(trained):
     agent, _ = trained
-    assert agent.num_timesteps == 300
+    assert agent.num_timesteps == 2 * 300  # SB3's samples trained on: 2 epochs of 300
     assert agent.goal_observation is not None
     assert agent.train_result is not None and agent.train_result.epochs == 2
 
@@ -111,23 +111,38 @@ def test_two_seeded_runs_give_same_actions(trained):
     np.testing.assert_array_equal(agent.predict(obs)[0], other.predict(obs)[0])
 
 
-def test_sb3_callbacks_work_during_learn(tmp_path):
+def test_sb3_callbacks_see_distinct_steps_during_learn(tmp_path):
+    """One callback step per epoch, and num_timesteps grows by the data set size each step (as
+    an SB3 step grows it by n_envs): checkpoints do not overwrite each other and evaluations
+    are logged at increasing times."""
     eval_env = gym.make(ENV_ID)
     agent = PCCAgent(
-        ENV_ID, method="e2c", preset=tiny_preset(epochs=2), seed=0, data_cache_dir=tmp_path / "data"
+        ENV_ID, method="e2c", preset=tiny_preset(epochs=3), seed=0, data_cache_dir=tmp_path / "data"
     )
+    seen = []
+
+    def spy(locals_, globals_):
+        seen.append(agent.num_timesteps)
+        return True
+
     callbacks = [
         EvalCallback(
-            eval_env, n_eval_episodes=1, eval_freq=2, log_path=str(tmp_path / "eval"), warn=False
+            eval_env, n_eval_episodes=1, eval_freq=1, log_path=str(tmp_path / "eval"), warn=False
         ),
         CheckpointCallback(save_freq=1, save_path=str(tmp_path / "ckpt")),
+        spy,
     ]
     agent.learn(total_timesteps=200, callback=callbacks)
-    assert (tmp_path / "eval" / "evaluations.npz").exists()
-    # One callback step per epoch; the checkpoint is named by env samples used (constant).
-    (saved,) = list((tmp_path / "ckpt").iterdir())
-    reloaded = PCCAgent.load(saved)
-    assert reloaded.method == "e2c" and reloaded.num_timesteps == 200
+    assert seen == [200, 400, 600] and agent.num_timesteps == 600
+    saved = sorted(p.name for p in (tmp_path / "ckpt").iterdir())
+    assert saved == ["rl_model_200_steps.zip", "rl_model_400_steps.zip", "rl_model_600_steps.zip"]
+    evaluations = np.load(tmp_path / "eval" / "evaluations.npz")
+    assert evaluations["timesteps"].tolist() == [200, 400, 600]
+    reloaded = PCCAgent.load(tmp_path / "ckpt" / "rl_model_400_steps.zip")
+    assert reloaded.method == "e2c" and reloaded.num_timesteps == 400
+    # Learning more continues the count unless told to reset it, as in SB3.
+    agent.learn(total_timesteps=200, callback=spy, reset_num_timesteps=False)
+    assert seen[3:] == [800, 1000, 1200] and agent.num_timesteps == 1200
 
 
 def test_unknown_method_is_refused():
@@ -216,7 +231,7 @@ def test_own_image_env_trains_plans_and_reloads(tmp_path):
     # No goal_observation() on this env: the trained model is kept, predict() waits for a goal.
     with pytest.warns(UserWarning, match="set_goal"):
         agent.learn(total_timesteps=300)
-    assert agent.train_result is not None and agent.num_timesteps == 300
+    assert agent.train_result is not None and agent.num_timesteps == 2 * 300
     obs, _ = env.reset(seed=1)
     with pytest.raises(RuntimeError, match="No goal set"):
         agent.predict(obs)

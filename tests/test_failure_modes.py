@@ -147,6 +147,17 @@ def test_predict_refuses_a_wrong_episode_start(untrained_agent):
     agent.predict(batch, episode_start=np.array([1, 0]))  # 0/1 flags, as SB3's envs give them
 
 
+# ------------------------------------------------------------------ learn's callback
+@pytest.mark.parametrize("callback", [42, "checkpoint", [print, None]], ids=["int", "str", "list"])
+def test_learn_refuses_what_is_not_a_callback_before_any_work(untrained_agent, callback):
+    agent, obs = untrained_agent
+    data = (np.stack([obs] * 4), np.zeros((4, 2), np.float32), np.stack([obs] * 4))
+    before = [p.detach().clone() for p in agent.model.parameters()]
+    with pytest.raises(TypeError, match="callback must be an SB3 BaseCallback, a function"):
+        agent.learn(dataset=data, callback=callback)
+    assert all(torch.equal(a, b) for a, b in zip(before, agent.model.parameters()))
+
+
 # ------------------------------------------------------------------ torch's own deprecation
 _JVP = ("import torch; from torch.func import jvp; "
         "jvp(torch.tanh, (torch.ones(2),), (torch.ones(2),))")
