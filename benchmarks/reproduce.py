@@ -50,6 +50,7 @@ from benchmarks.presets import (
     RESTART_SEED_STRIDE,
     ReproducePreset,
 )
+from benchmarks.worker_lifetime import end_with_driver
 
 DEFAULT_RESULTS_DIR = Path("pcc_results") / "reproduce"
 RESULT_FORMAT = 1
@@ -535,17 +536,22 @@ def _worker_init() -> None:
     torch.set_num_threads(1)
 
 
-def _pool_worker_init(parent_ignores_sigint: bool = False) -> None:
+def _pool_worker_init(parent_ignores_sigint: bool = False, driver_pid: int | None = None,
+                      forked_by_main_thread: bool = False) -> None:
     """A pool worker ends at Ctrl-C (the terminal signals the whole process group).
 
     Python's default would raise KeyboardInterrupt inside the run, which the pool reports as
     that run's result before the worker takes the next queued run. The run's training
     checkpoint is kept, so re-running the grid continues it. A grid started in the background
     by a non-interactive shell ignores SIGINT; its workers then ignore it too, so a stray
-    SIGINT cannot kill them under a main process that keeps going.
+    SIGINT cannot kill them under a main process that keeps going. A worker also ends when
+    the driver ``driver_pid`` ends without stopping it (``kill -9``): see
+    :func:`benchmarks.worker_lifetime.end_with_driver`.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN if parent_ignores_sigint else signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the main process's graceful handler
+    if driver_pid is not None:
+        end_with_driver(driver_pid, forked_by_main_thread)
     _worker_init()
 
 
@@ -647,11 +653,15 @@ def pool_outcomes(
     """``run(spec, *args)`` for every spec in a pool of ``workers`` processes.
 
     If the consumer stops early (Ctrl-C, an error, ``close()``), the queued runs are
-    cancelled instead of being trained silently before the program exits.
+    cancelled instead of being trained silently before the program exits. If this process is
+    killed outright (``kill -9``), the workers end with it.
     """
     parent_ignores_sigint = signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    # The workers are created by the submits below, in this same thread.
+    main_thread = threading.current_thread() is threading.main_thread()
     pool = ProcessPoolExecutor(
-        max_workers=workers, initializer=_pool_worker_init, initargs=(parent_ignores_sigint,)
+        max_workers=workers, initializer=_pool_worker_init,
+        initargs=(parent_ignores_sigint, os.getpid(), main_thread),
     )
     futures: dict[Any, RunSpec] = {}
     try:

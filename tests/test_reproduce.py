@@ -345,10 +345,10 @@ def test_cost_estimate_uses_finished_runs_of_the_same_kind():
 
 
 def _sleepy_run(spec: RunSpec, marker_dir: str | Path, seconds: float = 0.3) -> dict:
-    """A stand-in run for the pool tests: leaves a marker, takes a moment."""
+    """A stand-in run for the pool tests: leaves a marker (its worker's pid), takes a moment."""
     import time
 
-    (Path(marker_dir) / f"{spec.seed}").write_text("started")
+    (Path(marker_dir) / f"{spec.seed}").write_text(str(os.getpid()))
     time.sleep(seconds)
     return {"seed": spec.seed}
 
@@ -372,8 +372,8 @@ def test_stopping_the_pool_cancels_queued_runs(tmp_path):
     assert started <= 8, f"{started} of 16 runs started although the grid was stopped"
 
 
-def _start_sleepy_grid(markers: Path) -> subprocess.Popen:
-    """A driver process running 8 five-second stand-in runs on 2 workers, in its own process
+def _start_sleepy_grid(markers: Path, seconds: float = 5.0) -> subprocess.Popen:
+    """A driver process running 8 stand-in runs of ``seconds`` on 2 workers, in its own process
     group and with SIGINT at its default (as under a terminal, even if pytest ignores it);
     returns once both workers are in their first run."""
     import signal
@@ -384,7 +384,8 @@ def _start_sleepy_grid(markers: Path) -> subprocess.Popen:
         "tiny_spec; from benchmarks.reproduce import _interrupt, collect_outcomes, "
         "pool_outcomes; import signal; signal.signal(signal.SIGTERM, _interrupt); "
         "specs = [tiny_spec(s) for s in range(8)]; "
-        f"collect_outcomes(pool_outcomes(_sleepy_run, specs, 2, {str(markers)!r}, 5.0), 8)"
+        f"collect_outcomes(pool_outcomes(_sleepy_run, specs, 2, {str(markers)!r}, {seconds}), "
+        "8)"
     )
     child = subprocess.Popen(
         [sys.executable, "-c", code], cwd=ROOT, start_new_session=True,
@@ -421,6 +422,46 @@ def test_stop_signal_stops_the_grid_at_once(tmp_path, how):
     assert "InvalidStateError" not in stderr
     time.sleep(1.0)
     assert len(list(markers.iterdir())) == 2, "runs started after the stop signal"
+
+
+def _is_running(pid: int) -> bool:
+    """Whether process ``pid`` exists and has not exited (a zombie has exited)."""
+    try:
+        with open(f"/proc/{pid}/stat") as handle:
+            return handle.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_killed_driver_leaves_no_worker_running(tmp_path):
+    """kill -9 of the driver (no handler runs): its pool workers end too, at once, instead of
+    finishing their runs (here a minute each) with nobody left to collect the results."""
+    import signal
+    import time
+
+    markers = tmp_path / "markers"
+    markers.mkdir()
+    child = _start_sleepy_grid(markers, seconds=60.0)
+    deadline = time.monotonic() + 10.0
+    while not all(path.read_text() for path in markers.iterdir()):  # pids still being written
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    workers = [int(path.read_text()) for path in markers.iterdir()]
+    assert len(set(workers)) == 2 and all(map(_is_running, workers))
+    alive = workers
+    try:
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait(timeout=30)
+        deadline = time.monotonic() + 10.0
+        while alive and time.monotonic() < deadline:
+            time.sleep(0.05)
+            alive = [pid for pid in alive if _is_running(pid)]
+        assert not alive, f"pool workers {alive} outlived their killed driver"
+    finally:
+        for pid in alive:  # do not leave them sleeping on the machine when the test fails
+            os.kill(pid, signal.SIGKILL)
+    assert len(list(markers.iterdir())) == 2, "runs started after the driver died"
 
 
 def test_interrupted_grid_exits_130_with_how_to_continue(tmp_path, monkeypatch, capsys):
