@@ -1,15 +1,24 @@
-"""Control quality of one trained agent under several planner settings.
+"""Choose planner settings with numbers: control quality over a grid of planner settings.
 
-The reproduction pipeline saves every trained agent (``<results>/checkpoints/...pt``); this
-script re-runs its control tasks with other plan lengths, cost weights or iteration counts,
-so that planner settings can be chosen with numbers before they go into a preset. Training
-is not repeated.
+Two modes:
 
-Example:
+* ``--oracle ENV_ID``: the true-dynamics oracle (:class:`pcc_agent.oracle.OracleController`)
+  plans with each setting. This is how the per-domain planner settings of
+  ``pcc_agent.presets`` are chosen: it measures what the planner itself allows, before any
+  learning, so the settings are not fitted to one learned model.
+* ``CHECKPOINT``: a saved agent (``PCCAgent.save``; the reproduction pipeline keeps one per
+  run under ``<results>/checkpoints/``) re-runs its control tasks with each setting; training
+  is not repeated.
+
+Settings are never chosen on the evaluation tasks: the tasks are drawn from
+``--task-seed`` (default 2021, a validation split), and the evaluation tasks' seed (2020,
+``benchmarks.presets``) is refused unless ``--allow-evaluation-tasks`` is given (to report,
+never to choose).
+
+Examples:
+    python -m benchmarks.planner_sweep --oracle pcc/CartPole-v0 --plan-lengths 10 50
+        --replan-every 1 5 --kappas 10 1000 --out benchmarks/results/planner_sweep/cp.json
     python -m benchmarks.planner_sweep CHECKPOINT --plan-lengths 10 20 40 --kappas 1 10
-
-    where CHECKPOINT is e.g. benchmarks/results/reproduce/checkpoints/runs/paper/
-    pcc_Planar-v0/noise0.0/pcc/seed1.pt
 """
 
 from __future__ import annotations
@@ -17,63 +26,152 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import itertools
-import json
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from benchmarks.presets import REPRODUCE_PRESETS
+from benchmarks.reproduce import _write_json_atomic
+
+#: Task seed of the validation split the settings are chosen on.
+VALIDATION_TASK_SEED = 2021
+#: Planner fields a sweep can vary, with their command-line option and type.
+SWEPT_FIELDS: dict[str, tuple[str, type]] = {
+    "plan_length": ("--plan-lengths", int),
+    "replan_every": ("--replan-every", int),
+    "kappa": ("--kappas", float),
+    "r_weight": ("--r-weights", float),
+    "terminal_weight": ("--terminal-weights", float),
+    "iterations": ("--iterations", int),
+    "mpc_iterations": ("--mpc-iterations", int),
+    "num_candidates": ("--num-candidates", int),
+    "num_extreme": ("--num-extreme", int),
+}
+
+
+def _weights(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(w) for w in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"state weights are comma-separated numbers such as 1,0.1; got {text!r}") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.planner_sweep``."""
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.planner_sweep",
+                                     description=__doc__.split("\n\n")[0])
+    target = parser.add_mutually_exclusive_group(required=True)
+    target.add_argument("checkpoint", type=Path, nargs="?", help="A PCCAgent file.")
+    target.add_argument("--oracle", metavar="ENV_ID", help="Sweep the true-dynamics oracle.")
+    for name, (option, kind) in SWEPT_FIELDS.items():
+        parser.add_argument(option, dest=name, type=kind, nargs="+", default=None,
+                            help=f"Values of PlannerConfig.{name} (default: the preset's).")
+    parser.add_argument("--state-weights", type=_weights, nargs="+", default=None,
+                        help="Oracle only: true-state weights, one comma-separated tuple each "
+                             "(default: ORACLE_CONFIGS).")
+    parser.add_argument("--num-tasks", type=int, default=REPRODUCE_PRESETS["paper"].num_tasks)
+    parser.add_argument("--task-seed", type=int, default=VALIDATION_TASK_SEED)
+    parser.add_argument("--allow-evaluation-tasks", action="store_true",
+                        help="Permit the evaluation tasks' seed (to report, not to choose).")
+    parser.add_argument("--out", type=Path, default=None, help="JSON file for the rows.")
+    return parser
+
+
+def settings_grid(base: Any, args: argparse.Namespace) -> list[Any]:
+    """Every valid combination of the swept values, as planner configs derived from ``base``.
+
+    A combination that ``PlannerConfig`` refuses (e.g. ``replan_every`` above
+    ``plan_length``) is left out with a printed note; a grid left empty is an error.
+    """
+    swept = {name: getattr(args, name) for name in SWEPT_FIELDS if getattr(args, name)}
+    configs, refused = [], []
+    for values in itertools.product(*swept.values()):
+        try:
+            configs.append(dataclasses.replace(base, **dict(zip(swept, values))))
+        except ValueError as error:
+            refused.append(str(error))
+            print(f"Left out {dict(zip(swept, values))}: {error}")
+    if not configs:
+        raise ValueError(f"no valid planner setting in the grid: {refused[0]}")
+    return configs
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m benchmarks.planner_sweep``."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("checkpoint", type=Path, help="A PCCAgent file (PCCAgent.save).")
-    parser.add_argument("--plan-lengths", type=int, nargs="+", default=[10])
-    parser.add_argument("--kappas", type=float, nargs="+", default=[1.0])
-    parser.add_argument("--r-weights", type=float, nargs="+", default=[0.1])
-    parser.add_argument("--mpc-iterations", type=int, nargs="+", default=[2])
-    parser.add_argument("--num-tasks", type=int, default=REPRODUCE_PRESETS["paper"].num_tasks)
-    parser.add_argument("--task-seed", type=int, default=REPRODUCE_PRESETS["paper"].task_seed)
-    parser.add_argument("--out", type=Path, default=None, help="JSON file for the rows.")
+    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
+    evaluation_seed = REPRODUCE_PRESETS["paper"].task_seed
+    if args.task_seed == evaluation_seed and not args.allow_evaluation_tasks:
+        parser.error(f"--task-seed {evaluation_seed} draws the evaluation tasks; planner "
+                     "settings are chosen on other tasks (default "
+                     f"{VALIDATION_TASK_SEED}). Add --allow-evaluation-tasks to report on them.")
+    if args.state_weights and not args.oracle:
+        parser.error("--state-weights applies to --oracle sweeps only")
 
     import torch
 
-    from pcc_agent import PCCAgent
     from pcc_agent.evaluation import evaluate_control, format_mean_se, task_seeds
 
     torch.set_num_threads(1)
-    agent = PCCAgent.load(args.checkpoint)
     seeds = task_seeds(args.task_seed, args.num_tasks)
-    base = agent.preset.planner
+    if args.oracle:
+        from pcc_agent.oracle import OracleController, agent_planner_for, oracle_config_for
+
+        env_id, method, env_kwargs = args.oracle, "oracle", None
+        base_planner = agent_planner_for(env_id)
+        oracle_base = oracle_config_for(env_id)
+        weight_grid = args.state_weights or [oracle_base.state_weights]
+    else:
+        from pcc_agent import PCCAgent
+
+        agent = PCCAgent.load(args.checkpoint)
+        env_id, method, env_kwargs = agent.env_id, agent.method, agent.env_kwargs
+        base_planner = agent.preset.planner
+        weight_grid = [None]
+    try:
+        configs = settings_grid(base_planner, args)
+    except ValueError as error:  # PlannerConfig refuses an inconsistent combination
+        parser.error(str(error))
     rows = []
-    grid = itertools.product(args.plan_lengths, args.kappas, args.r_weights, args.mpc_iterations)
-    for plan_length, kappa, r_weight, mpc_iterations in grid:
-        agent.preset = dataclasses.replace(
-            agent.preset,
-            planner=dataclasses.replace(base, plan_length=plan_length, kappa=kappa,
-                                        r_weight=r_weight, mpc_iterations=mpc_iterations),
-        )
-        agent._plan_generator.manual_seed(agent.seed)
+    for planner, weights in itertools.product(configs, weight_grid):
         start = time.perf_counter()
-        result = evaluate_control(agent, agent.env_id, seeds, agent.env_kwargs,
-                                  record_states=False)
+        if args.oracle:
+            oracle = dataclasses.replace(oracle_base, state_weights=weights)
+            result = evaluate_control(
+                lambda env, o=oracle, p=planner: OracleController(env, o, p),
+                env_id, seeds, env_kwargs, record_states=False)
+        else:
+            agent.preset = dataclasses.replace(agent.preset, planner=planner)
+            agent._plan_generator.manual_seed(agent.seed)
+            result = evaluate_control(agent, env_id, seeds, env_kwargs, record_states=False)
         row = {
-            "checkpoint": str(args.checkpoint), "env": agent.env_id, "method": agent.method,
-            "plan_length": plan_length, "kappa": kappa, "r_weight": r_weight,
-            "mpc_iterations": mpc_iterations, "num_tasks": len(seeds), "task_seed": args.task_seed,
+            "env": env_id, "method": method,
+            "checkpoint": None if args.oracle else str(args.checkpoint),
+            **{name: getattr(planner, name) for name in SWEPT_FIELDS},
+            "state_weights": list(weights) if weights is not None else None,
+            "num_tasks": len(seeds), "task_seed": args.task_seed,
             "mean": result.mean, "se": result.standard_error,
             "percentages": result.percentages.tolist(),
             "seconds": time.perf_counter() - start,
         }
         rows.append(row)
-        print(f"plan {plan_length:4d} kappa {kappa:6g} R {r_weight:6g} mpc iters "
-              f"{mpc_iterations}: {format_mean_se(row['mean'], row['se'])} % in goal", flush=True)
+        varied = ", ".join(f"{name} {getattr(planner, name):g}" for name in SWEPT_FIELDS
+                           if getattr(args, name))
+        if weights is not None and args.state_weights:
+            varied += f", state weights {weights}"
+        print(f"{varied or 'preset settings'}: {format_mean_se(row['mean'], row['se'])} % in "
+              f"goal ({row['seconds']:.0f} s)", flush=True)
+        if args.out is not None:  # after every row: a cut-short sweep keeps what it measured
+            done = len(rows) == len(configs) * len(weight_grid)
+            _write_json_atomic(args.out, {
+                "command": " ".join(["python -m benchmarks.planner_sweep", *argv]),
+                "status": "done" if done else "partial", "rows": rows})
     if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(rows, indent=1))
+        print(f"Wrote {args.out}")
     return 0
 
 

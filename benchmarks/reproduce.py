@@ -293,8 +293,8 @@ def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
     """Whether a record was evaluated by this planner revision with the preset's settings.
 
     Records without a revision were evaluated by revision 1. Oracle records are compared
-    with the env's current ``ORACLE_CONFIGS`` entry; no-action records plan nothing and
-    always match.
+    with the env's current ``ORACLE_CONFIGS`` entry and the preset's planner (the oracle runs
+    the agents' settings); no-action records plan nothing and always match.
     """
     from pcc_agent.planning import PLANNER_REVISION
 
@@ -307,7 +307,8 @@ def _same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
         from pcc_agent.oracle import oracle_config_for
 
         wanted = json.loads(json.dumps(asdict(oracle_config_for(spec.env_id))))
-        return config.get("oracle") == wanted
+        if config.get("oracle") != wanted:
+            return False
     wanted = json.loads(json.dumps(asdict(_preset_for(spec).planner)))
     return config.get("planner") == wanted
 
@@ -380,11 +381,13 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         from pcc_agent.oracle import OracleController, oracle_config_for
 
         config = oracle_config_for(spec.env_id)
-        record["config"] = {"oracle": asdict(config), "planner_revision": PLANNER_REVISION}
+        planner = _preset_for(spec).planner  # the agents' own settings: a true ceiling
+        record["config"] = {"oracle": asdict(config), "planner": asdict(planner),
+                            "planner_revision": PLANNER_REVISION}
         record["train_seconds"] = 0.0
         evaluation_start = time.perf_counter()
         evaluation = evaluate_control(
-            lambda env: OracleController(env, config), spec.env_id, seeds, env_kwargs
+            lambda env: OracleController(env, config, planner), spec.env_id, seeds, env_kwargs
         )
     elif spec.method == NO_ACTION:
         from benchmarks.no_action_floor import ZeroActionPolicy
@@ -787,8 +790,8 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         """
         own = {(k[0], k[2], k[3]): float(np.mean(v[0]["percentages"]))
                for k, v in groups.items() if k[1] == method}
-        by_tasks = {(k[0], k[2], v[0]["spec"].get("task_seed"), len(v[0]["percentages"])):
-                    float(np.mean(v[0]["percentages"]))
+        by_tasks = {(k[0], k[2], v[0]["spec"].get("task_seed"), len(v[0]["percentages"]),
+                     planner_revision_of(v[0])): float(np.mean(v[0]["percentages"]))
                     for k, v in groups.items() if k[1] == method}
         return own, by_tasks
 
@@ -797,7 +800,10 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     def reference_mean(method: str, env_id: str, noise: float, preset: str,
                        recs: list[dict[str, Any]]) -> float | None:
         own, by_tasks = references[method]
-        tasks = (env_id, noise, recs[0]["spec"].get("task_seed"), len(recs[0]["percentages"]))
+        # An oracle only serves rows of its own planner revision; the floor plans nothing.
+        revision = None if method == NO_ACTION else planner_revision_of(recs[0])
+        tasks = (env_id, noise, recs[0]["spec"].get("task_seed"), len(recs[0]["percentages"]),
+                 revision)
         return own.get((env_id, noise, preset), by_tasks.get(tasks))
 
     rows = []
@@ -844,7 +850,7 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def _registered_preset(label: str) -> ReproducePreset | None:
     """The registered preset behind a row label such as ``"paper+max_epochs=5"``."""
-    return REPRODUCE_PRESETS.get(label.split("+", 1)[0])
+    return REPRODUCE_PRESETS.get(label.split(" [", 1)[0].split("+", 1)[0])
 
 
 def _fmt(pair: Sequence[float | None] | None) -> str:
@@ -963,8 +969,32 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def planner_revision_of(record: dict[str, Any]) -> int | None:
+    """The planner revision a record was evaluated with (None: it planned nothing)."""
+    if record.get("spec", {}).get("method") == NO_ACTION:
+        return None
+    return int(record.get("config", {}).get("planner_revision", 1))
+
+
+def planner_tag(revision: int | None) -> str:
+    """The suffix of a row label made by an older planner revision, e.g. ``" [planner r2]"``."""
+    from pcc_agent.planning import PLANNER_REVISION
+
+    if revision is None or revision == PLANNER_REVISION:
+        return ""
+    return f" [planner r{revision}]"
+
+
 def load_records(results_dir: Path) -> list[dict[str, Any]]:
-    """Every finished run record below ``results_dir``."""
+    """Every finished run record below ``results_dir``.
+
+    Records evaluated by an older planner revision are kept, with their preset label
+    suffixed by :func:`planner_tag` (``"paper-fast-long [planner r2]"``), so that no summary
+    row or reference column mixes two planners; records of the current revision with other
+    planner settings than the preset's are left out (the grid re-evaluates them).
+    """
+    from pcc_agent.planning import PLANNER_REVISION
+
     records = []
     for path in sorted((results_dir / "runs").rglob("*.json")):
         rec = load_finished_run(path)
@@ -975,13 +1005,19 @@ def load_records(results_dir: Path) -> list[dict[str, Any]]:
         except TypeError:  # a hand-made or older record without a full spec: no check
             records.append(rec)
             continue
-        if not _same_planner(rec, spec):
-            print(f"Not aggregated (evaluated by another planner revision or with other planner "
-                  f"settings than the preset's; re-run the grid to re-evaluate it): {path}")
-            continue
         if not _same_recipe(rec, spec):
             print(f"Not aggregated (trained with other data, network or training settings than "
                   f"the preset's; re-run the grid to retrain it): {path}")
+            continue
+        revision = planner_revision_of(rec)
+        if revision is not None and revision != PLANNER_REVISION:
+            # Kept as history, in rows of their own: the preset label says which planner.
+            records.append({**rec, "spec": {**rec["spec"], "preset": rec["spec"]["preset"]
+                                            + planner_tag(revision)}})
+            continue
+        if not _same_planner(rec, spec):
+            print(f"Not aggregated (evaluated with other planner settings than the preset's; "
+                  f"re-run the grid to re-evaluate it): {path}")
             continue
         records.append(rec)
     return records

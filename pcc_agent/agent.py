@@ -434,8 +434,32 @@ class PCCAgent:
             )
         return obs
 
-    def _check_state(self, state: Any, n: int) -> np.ndarray:
-        """The warm start ``state`` as float32 ``(n, plan_length, action_dim)``, or ValueError."""
+    def _check_state(self, state: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The warm start and the open-loop steps left, from ``state``; ValueError if malformed.
+
+        With ``replan_every == 1`` the state is the plans array alone; with more it is the
+        pair ``(plans, steps_left)``, ``steps_left`` one integer per observation.
+        """
+        replan_every = self.preset.planner.replan_every
+        if replan_every == 1:
+            return self._check_plans(state, n), np.zeros(n, dtype=np.int64)
+        if not (isinstance(state, tuple) and len(state) == 2):
+            raise ValueError(
+                f"predict(): with replan_every={replan_every} the state is the pair (plans, "
+                "steps_left) that the previous predict() call returned, or None at the start; "
+                f"got {type(state).__name__}."
+            )
+        left = np.asarray(state[1])
+        if (left.shape != (n,) or not np.issubdtype(left.dtype, np.integer)
+                or left.min(initial=0) < 0 or left.max(initial=0) >= replan_every):
+            raise ValueError(
+                f"predict(): steps_left must be {n} integers in [0, {replan_every - 1}], got "
+                f"{left.dtype} {left.shape}: pass back the state predict() returned."
+            )
+        return self._check_plans(state[0], n), left.astype(np.int64)
+
+    def _check_plans(self, state: Any, n: int) -> np.ndarray:
+        """The warm start as float32 ``(n, plan_length, action_dim)``, or ValueError."""
         warm = np.asarray(state)
         expected = (n, self.preset.planner.plan_length, self.action_dim)
         if not np.issubdtype(warm.dtype, np.floating):
@@ -479,17 +503,19 @@ class PCCAgent:
     def predict(
         self,
         observation: np.ndarray,
-        state: np.ndarray | None = None,
+        state: np.ndarray | tuple[np.ndarray, np.ndarray] | None = None,
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
-    ) -> tuple[np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray | tuple[np.ndarray, np.ndarray]]:
         """Plan with latent iLQR-MPC and return the first action.
 
         Args:
             observation: One observation ``(frames, H, W)`` or a batch ``(n, frames, H, W)``.
             state: The MPC warm start returned by the previous call (shifted plans, float
                 ``(n, T, action_dim)`` with ``T`` the planner's ``plan_length``; ``n`` is 1 for
-                one observation), or None at the start.
+                one observation), or None at the start. With the planner's ``replan_every``
+                above 1 it is the pair ``(plans, steps_left)``: the carried plan is executed
+                open loop while ``steps_left`` is positive, then refined.
             episode_start: Booleans (or 0/1) ``(n,)``: True where an episode starts (its warm
                 start is dropped and it plans from scratch).
             deterministic: Unused: the MPC policy is deterministic given the seed.
@@ -510,7 +536,8 @@ class PCCAgent:
         single = obs.shape == self.obs_shape
         batch = obs[None] if single else obs
         n = batch.shape[0]
-        warm_np = None if state is None else self._check_state(state, n)
+        warm_np, steps_left = (None, np.zeros(n, dtype=np.int64)) if state is None else (
+            self._check_state(state, n))
         starts = None if episode_start is None else self._check_episode_start(episode_start, n)
         self.model.eval()
         both = torch.as_tensor(np.concatenate([batch, self._goal_obs[None]]), device=self.device)
@@ -526,20 +553,29 @@ class PCCAgent:
             fresh = np.zeros(n, dtype=bool)
         if starts is not None:
             fresh |= starts
+        # Between replans (replan_every > 1) the carried plan is executed as it is.
+        open_loop = ~fresh & (steps_left > 0)
+        refine = ~fresh & ~open_loop
         u_plan = torch.empty(n, config.plan_length, self.action_dim, device=self.device)
         if fresh.any():
             idx = torch.as_tensor(np.flatnonzero(fresh), device=self.device)
             result = plan(dynamics, cost, z0[idx], config, self._plan_generator)
             u_plan[idx] = result.u.to(u_plan.dtype)
-        if (~fresh).any():
-            idx = torch.as_tensor(np.flatnonzero(~fresh), device=self.device)
+        if refine.any():
+            idx = torch.as_tensor(np.flatnonzero(refine), device=self.device)
             result = plan(dynamics, cost, z0[idx], config, self._plan_generator, warm[idx])
             u_plan[idx] = result.u.to(u_plan.dtype)
+        if open_loop.any():
+            idx = torch.as_tensor(np.flatnonzero(open_loop), device=self.device)
+            u_plan[idx] = warm[idx]
         low = torch.as_tensor(self.env.action_space.low, device=self.device)
         high = torch.as_tensor(self.env.action_space.high, device=self.device)
         actions = torch.clamp(u_plan[:, 0], low, high).cpu().numpy().astype(np.float32)
-        next_state = torch.cat([u_plan[:, 1:], u_plan[:, -1:]], dim=1).cpu().numpy()
-        return (actions[0] if single else actions), next_state
+        next_plans = torch.cat([u_plan[:, 1:], u_plan[:, -1:]], dim=1).cpu().numpy()
+        if config.replan_every == 1:
+            return (actions[0] if single else actions), next_plans
+        left = np.where(open_loop, steps_left - 1, config.replan_every - 1).astype(np.int64)
+        return (actions[0] if single else actions), (next_plans, left)
 
     # ------------------------------------------------------------------ persistence
     def config_dict(self) -> dict[str, Any]:

@@ -47,9 +47,17 @@ class CartPoleEnv(ImageControlEnv):
     wrapped. Sparse: ``1`` in the goal region (``|theta| <= pi/10``, ``|x| <= 2.4``).
 
     ## Starting State
-    ``theta`` uniform in ``[-pi/6, pi/6]``, everything else 0. The data sampler draws
-    uniformly from ``theta`` in ``[-pi/2, pi/2]``, ``theta_dot`` in ``[-2 pi, 2 pi]``,
-    ``x`` in ``[-2.4, 2.4]``, ``x_dot`` in ``[-3, 3]``.
+    ``theta`` uniform in ``[-pi/6, pi/6]``, everything else 0 (the paper's start state). The
+    data sampler draws uniformly from ``theta`` in ``[-pi/2, pi/2]``, ``theta_dot`` in
+    ``[-2 pi, 2 pi]``, ``x`` in ``[-2.4, 2.4]``, ``x_dot`` in ``[-3, 3]``.
+
+    Why these data ranges: the paper samples "uniformly from the state-action space" and
+    gives no ranges. The PC3 reference code samples ``theta`` in ``[-pi/10, pi/10]``, which is
+    narrower than the paper's own start states (``pi/6``): a model trained on it never sees
+    the first frames of a task. ``[-pi/2, pi/2]`` covers every start state and a falling pole
+    down to horizontal; its cost is data density near upright (about a fifth of the samples
+    lie inside the goal band ``pi/10``). The track limit is the terminal bound ``2.4``;
+    ``theta_dot`` and ``x_dot`` bound what the 10 N force produces from the start states.
 
     ## Episode End
     Terminates when the cart leaves the track (``|x| > 2.4``); a fallen pole does not end the

@@ -59,6 +59,14 @@ class ManipulatorEnv(ImageControlEnv):
     2 links ``(pi, pi/2)``. The data sampler draws every angle uniformly in ``[-pi, pi]`` and
     every joint velocity in ``[-2 pi, 2 pi]``.
 
+    Why these choices: the paper gives the start state and the goal, but neither the
+    sampling ranges nor the torque limits. Full-circle angles are needed because a swing-up
+    passes through every configuration; ``2 pi`` rad/s bounds the joint rates that the
+    default torques reach in a swing-up. The torques (3/4 of the static holding torque, see
+    Action Space) make swing-up a pumping task, as the paper's "swing up and balance"
+    describes, rather than a straight lift; the 2-link arm's start ``(pi, pi/2)`` follows the
+    paper's ``q_i = (N - i + 1) pi / N`` rule, which the paper states only for 3 links.
+
     ## Episode End
     Truncation after 400 steps. Never terminates. Success (``in_goal``): the last link's
     absolute angle ``q_1 + ... + q_N`` is within ``pi/6`` of upright *and* every joint and the

@@ -261,3 +261,29 @@ def test_own_env_gets_the_asked_variant():
     for small_or_large in (env, DotEnv(size=16)):  # a typo is refused at any image size
         with pytest.raises(ValueError, match="variant"):
             PCCAgent(small_or_large, preset="huge", seed=0)
+
+
+def test_replan_every_executes_the_carried_plan_between_replans(trained):
+    agent, _ = trained
+    original = agent.preset
+    agent.preset = dataclasses.replace(
+        original, planner=dataclasses.replace(original.planner, replan_every=3))
+    try:
+        obs, _ = gym.make(ENV_ID).reset(seed=0)
+        action, (plans, left) = agent.predict(obs)
+        assert plans.shape == (1, 5, 2) and left.tolist() == [2]
+        # Open loop: the next two actions are the carried plan's, whatever the observation.
+        other = np.zeros_like(obs)
+        action2, (plans2, left2) = agent.predict(other, state=(plans, left))
+        np.testing.assert_array_equal(action2, np.clip(plans[0, 0], -1, 1))
+        assert left2.tolist() == [1]
+        _, (_, left3) = agent.predict(other, state=(plans2, left2))
+        assert left3.tolist() == [0]
+        _, (_, left4) = agent.predict(obs, state=(plans2, np.array([0])))  # replans
+        assert left4.tolist() == [2]
+        with pytest.raises(ValueError, match="steps_left"):
+            agent.predict(obs, state=(plans, np.array([3])))
+        with pytest.raises(ValueError, match="pair"):
+            agent.predict(obs, state=plans)
+    finally:
+        agent.preset = original

@@ -365,3 +365,40 @@ def test_compiled_loops_check_shapes_and_keep_autograd() -> None:
     z0 = torch.zeros(1, 2, dtype=DTYPE, requires_grad=True)
     rollout(dynamics, z0, torch.ones(1, 3, 1, dtype=DTYPE))[:, -1].sum().backward()
     assert z0.grad is not None and torch.isfinite(z0.grad).all()
+
+
+def test_initial_plans_hold_constant_and_bang_bang_extremes_then_uniform():
+    from pcc_agent.planning.ilqr import initial_plans
+
+    config = PlannerConfig(plan_length=7, num_candidates=6, num_extreme=3, action_low=-0.5,
+                           action_high=2.0)
+    plans = initial_plans(4, config, 2, torch.Generator().manual_seed(0), torch.float64)
+    assert plans.shape == (4, 6, 7, 2)
+    assert torch.all(plans[:, 0] == -0.5) and torch.all(plans[:, 1] == 2.0)
+    assert torch.all((plans[:, 2] == -0.5) | (plans[:, 2] == 2.0))  # bang-bang
+    assert not torch.all(plans[:, 2] == plans[:, 2, :1])  # not constant
+    inside = plans[:, 3:]
+    assert torch.all((inside > -0.5) & (inside < 2.0))  # uniform, strictly inside
+    # Default (2 extremes) keeps the earlier draws bit for bit.
+    two = initial_plans(1, PlannerConfig(plan_length=3), 1, torch.Generator().manual_seed(1))
+    old = -1 + 2 * torch.rand((1, 6, 3, 1), generator=torch.Generator().manual_seed(1))
+    torch.testing.assert_close(two[:, 2:], old[:, 2:], rtol=0, atol=0)
+
+
+def test_mpc_replans_every_k_steps_and_executes_the_plan_in_between():
+    config = PlannerConfig(plan_length=6, iterations=2, mpc_iterations=1, replan_every=3)
+    dynamics = MLPDynamics.random(2, 1, (8,), torch.Generator().manual_seed(0))
+    mpc = LatentMPC(dynamics, QuadraticCost.from_config(config, torch.zeros(2), 1), config)
+    z = torch.ones(2)
+    planned = []
+    for _ in range(7):
+        before = mpc.last_result
+        action = mpc.act(z)
+        planned.append(mpc.last_result is not before)
+        z = dynamics.step(z[None], action[None])[0]
+    assert planned == [True, False, False, True, False, False, True]
+
+
+def test_replan_every_beyond_the_plan_is_refused():
+    with pytest.raises(ValueError, match="replan_every"):
+        PlannerConfig(plan_length=4, replan_every=5)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import pytest
+
 from benchmarks import planner_sweep
 from pcc_agent import PCCAgent
 from pcc_agent.planning.config import PlannerConfig
@@ -25,6 +27,27 @@ def test_planner_sweep_runs_every_setting(tmp_path):
     assert planner_sweep.main([str(tmp_path / "a.pt"), "--plan-lengths", "3", "6",
                                "--mpc-iterations", "1", "--num-tasks", "1",
                                "--out", str(out)]) == 0
-    rows = json.loads(out.read_text())
+    payload = json.loads(out.read_text())
+    rows = payload["rows"]
+    assert payload["status"] == "done" and payload["command"].endswith(str(out))
     assert [r["plan_length"] for r in rows] == [3, 6]
     assert all(0.0 <= r["mean"] <= 100.0 for r in rows)
+    assert {r["task_seed"] for r in rows} == {planner_sweep.VALIDATION_TASK_SEED}
+
+
+def test_oracle_sweep_leaves_out_invalid_settings_and_records_state_weights(tmp_path, capsys):
+    out = tmp_path / "oracle.json"
+    assert planner_sweep.main(["--oracle", "pcc/PendulumBalance-v0", "--plan-lengths", "3",
+                               "--replan-every", "1", "5", "--num-candidates", "2",
+                               "--state-weights", "1,0.1", "1,0", "--num-tasks", "1",
+                               "--out", str(out)]) == 0
+    assert "Left out" in capsys.readouterr().out  # replan_every 5 > plan_length 3
+    rows = json.loads(out.read_text())["rows"]
+    assert [r["state_weights"] for r in rows] == [[1.0, 0.1], [1.0, 0.0]]
+    assert all(r["method"] == "oracle" and r["replan_every"] == 1 for r in rows)
+
+
+def test_sweep_refuses_the_evaluation_tasks_unless_asked(capsys):
+    with pytest.raises(SystemExit):
+        planner_sweep.main(["--oracle", "pcc/Planar-v0", "--task-seed", "2020"])
+    assert "evaluation tasks" in capsys.readouterr().err

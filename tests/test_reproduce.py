@@ -535,19 +535,50 @@ def test_summary_says_which_table_and_when_the_grid_is_reduced():
     assert _models_cell(beyond) == "12 x 2 (2 beyond the preset's 10)"
 
 
-def test_oracle_record_of_other_oracle_settings_is_stale(tmp_path):
+def test_oracle_record_of_other_oracle_or_planner_settings_is_stale(tmp_path):
+    from benchmarks.reproduce import _preset_for
     from pcc_agent.oracle import oracle_config_for
 
     spec = dataclasses.replace(tiny_spec(), method="oracle", num_samples=None, max_epochs=None)
     oracle = json.loads(json.dumps(dataclasses.asdict(oracle_config_for(spec.env_id))))
+    planner = json.loads(json.dumps(dataclasses.asdict(_preset_for(spec).planner)))
     record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": [],
-              "config": {"oracle": oracle, "planner_revision": PLANNER_REVISION}}
+              "config": {"oracle": oracle, "planner": planner,
+                         "planner_revision": PLANNER_REVISION}}
     path = tmp_path / "oracle.json"
     path.write_text(json.dumps(record))
     assert load_finished_run(path, spec) is not None
-    record["config"]["oracle"] = {**oracle, "r_weight": 123.0}
-    path.write_text(json.dumps(record))
-    assert load_finished_run(path, spec) is None
+    for changed in ({"oracle": {**oracle, "fd_step": 123.0}},
+                    {"planner": {**planner, "plan_length": planner["plan_length"] + 1}}):
+        path.write_text(json.dumps({**record, "config": {**record["config"], **changed}}))
+        assert load_finished_run(path, spec) is None
+
+
+def test_summary_keeps_older_planner_rows_apart_with_their_own_oracle(tmp_path):
+    from benchmarks.reproduce import NO_ACTION, _preset_for, aggregate, load_records
+
+    def write(method, seed, revision, percentages, preset="test"):
+        spec = dataclasses.replace(tiny_spec(), method=method, seed=seed, preset=preset,
+                                   num_samples=None, max_epochs=None)
+        config = {} if method == NO_ACTION else {"planner_revision": revision}
+        if method == "pcc":  # what a trained agent records (PCCAgent.config_dict)
+            preset = _preset_for(spec)
+            config.update(train=preset.train.to_dict(), model=preset.model.to_dict(),
+                          data=dataclasses.asdict(preset.data))
+        record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec),
+                  "percentages": percentages, "train_seconds": 0.0, "config": config}
+        path = tmp_path / "runs" / f"{method}_{seed}_r{revision}.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(record))
+
+    write("pcc", 0, PLANNER_REVISION - 1, [10.0])
+    write("oracle", 0, PLANNER_REVISION - 1, [50.0])
+    write(NO_ACTION, 0, None, [1.0])
+    rows = {(r["method"], r["preset"]): r for r in aggregate(load_records(tmp_path))}
+    old = f"test [planner r{PLANNER_REVISION - 1}]"
+    assert set(rows) == {("pcc", old), ("oracle", old), (NO_ACTION, "test")}
+    assert rows[("pcc", old)]["oracle_mean"] == 50.0  # its own revision's ceiling
+    assert rows[("pcc", old)]["floor_mean"] == 1.0  # the floor plans nothing: any revision
 
 
 @pytest.mark.parametrize(

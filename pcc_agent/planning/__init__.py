@@ -20,8 +20,11 @@ from pcc_agent.planning.mpc import LatentMPC, shift_plan
 #: whenever a change can alter the actions planned for the same model and settings (closed-loop
 #: outcomes near obstacles can flip on small differences), so that the reproduction pipeline
 #: re-evaluates records of an older planner from their saved agents. 1: torch float32 loops;
-#: 2: compiled float64 loops (re-evaluating the Planar records gave the same per-task results).
-PLANNER_REVISION = 2
+#: 2: compiled float64 loops (re-evaluating the Planar records gave the same per-task results);
+#: 3: per-domain planner settings chosen with the oracle (horizons, 3 uniform + 3 extreme
+#: initial plans), an oracle that runs the agents' settings, ``replan_every``. Summaries keep
+#: older records in rows labelled ``[planner rN]``.
+PLANNER_REVISION = 3
 
 __all__ = [
     "CostDerivatives",

@@ -24,9 +24,16 @@ class PlannerConfig:
         terminal_weight: Multiplier of ``Q`` for the terminal cost: ``Q_T = terminal_weight * Q``.
         iterations: iLQR iterations for a plan computed from scratch (first MPC step).
         mpc_iterations: iLQR iterations per MPC step after a warm start.
+        replan_every: Actions executed from one plan before the MPC plans again (1: replan
+            at every step). Between replans the carried plan's next action is applied open
+            loop; a longer horizon costs less per step when it is replanned less often.
         num_candidates: Initial plans optimized together as a batch when planning from scratch;
-            the first two are the constant extreme plans (``action_low`` and ``action_high``),
-            the rest are uniform random. The plan with the lowest final cost is kept.
+            the first ``num_extreme`` are extreme plans and the rest are uniform random in the
+            action box (when ``num_candidates <= num_extreme``, all are uniform). The plan with
+            the lowest final cost is kept.
+        num_extreme: How many of the candidates are extreme plans: the constant plans at
+            ``action_low`` and at ``action_high``, then random bang-bang plans (every action
+            component drawn from ``{action_low, action_high}``).
         line_search_steps: Step sizes alpha tried, all in one batched rollout, by the forward
             pass; the best one that decreases the cost is accepted.
         mu_init: Initial Levenberg-Marquardt regularization added to ``Q_uu``.
@@ -45,7 +52,9 @@ class PlannerConfig:
     terminal_weight: float = 1.0
     iterations: int = 4
     mpc_iterations: int = 2
+    replan_every: int = 1
     num_candidates: int = 6
+    num_extreme: int = 2
     line_search_steps: tuple[float, ...] = (1.0, 0.5, 0.25, 0.1, 0.03)
     mu_init: float = 1e-6
     mu_min: float = 1e-6
@@ -66,6 +75,13 @@ class PlannerConfig:
             )
         if self.num_candidates < 1:
             raise ValueError(f"num_candidates must be >= 1, got {self.num_candidates}.")
+        if self.num_extreme < 0:
+            raise ValueError(f"num_extreme must be >= 0, got {self.num_extreme}.")
+        if not 1 <= self.replan_every <= self.plan_length:
+            raise ValueError(
+                f"replan_every must be between 1 and plan_length ({self.plan_length}), got "
+                f"{self.replan_every}: a plan cannot be executed for longer than it lasts."
+            )
         if not self.line_search_steps or any(a <= 0 for a in self.line_search_steps):
             raise ValueError(
                 f"line_search_steps must be non-empty and positive, got {self.line_search_steps}."

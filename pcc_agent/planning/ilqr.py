@@ -393,15 +393,18 @@ def initial_plans(
     generator: torch.Generator,
     dtype: torch.dtype = torch.float32,
 ) -> Tensor:
-    """Candidate initial plans: constant extremes and uniform random sequences.
+    """Candidate initial plans: extreme plans and uniform random sequences.
 
-    With ``C = config.num_candidates >= 3`` the first two candidates of each problem are the
-    constant plans at ``action_low`` and ``action_high`` and the other ``C - 2`` are uniform in
-    the box; with fewer, all are random.
+    With ``C = config.num_candidates`` greater than ``E = config.num_extreme``, the first
+    ``E`` candidates of each problem are extreme: the constant plans at ``action_low`` and at
+    ``action_high``, then random bang-bang plans (every component ``action_low`` or
+    ``action_high``); the other ``C - E`` are uniform in the box. With ``C <= E`` all are
+    uniform, so at least one candidate explores the inside of the box.
 
     Args:
         num_problems: Number of problems ``B``.
-        config: Planner settings (``num_candidates``, ``plan_length``, bounds).
+        config: Planner settings (``num_candidates``, ``num_extreme``, ``plan_length``,
+            bounds).
         action_dim: Action dimension ``nu``.
         generator: Source of randomness (a CPU generator).
         dtype: Dtype of the plans.
@@ -412,9 +415,14 @@ def initial_plans(
     low, high = config.action_low, config.action_high
     shape = (num_problems, config.num_candidates, config.plan_length, action_dim)
     plans = low + (high - low) * torch.rand(shape, generator=generator, dtype=dtype)
-    if config.num_candidates >= 3:
+    n_extreme = config.num_extreme if config.num_candidates > config.num_extreme else 0
+    if n_extreme >= 1:
         plans[:, 0] = low
+    if n_extreme >= 2:
         plans[:, 1] = high
+    if n_extreme >= 3:
+        bang = torch.rand((num_problems, n_extreme - 2, *shape[2:]), generator=generator)
+        plans[:, 2:n_extreme] = torch.where(bang < 0.5, low, high).to(dtype)
     return plans
 
 

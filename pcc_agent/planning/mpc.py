@@ -1,9 +1,10 @@
 """Receding-horizon control (MPC) with the latent iLQR planner.
 
 At the first step of an episode a plan is computed from scratch (several candidate initial
-plans, ``config.iterations`` iterations); at every later step the previous plan, shifted by
-one step with its last action repeated, is refined for ``config.mpc_iterations`` iterations
-from the new latent state, and its first action is applied.
+plans, ``config.iterations`` iterations); every ``config.replan_every`` steps after that the
+previous plan, shifted by the executed steps with its last action repeated, is refined for
+``config.mpc_iterations`` iterations from the new latent state. Every step applies the
+carried plan's next action.
 
 The warm start is plain data (a tensor ``(B, T, nu)``), so a policy can carry it between
 calls, e.g. in the ``state`` of Stable-Baselines3's ``predict``: use
@@ -70,11 +71,14 @@ class LatentMPC:
             self.generator.manual_seed(seed)
         self.warm_start: Tensor | None = None
         self.last_result: ILQRResult | None = None
+        #: Actions of the carried plan still to execute before the next replan.
+        self.open_loop_left = 0
 
     def reset(self) -> None:
         """Forget the carried plan: the next call plans from scratch."""
         self.warm_start = None
         self.last_result = None
+        self.open_loop_left = 0
 
     def set_goal(self, goal: Tensor) -> None:
         """Change the goal latent state ``(nz,)`` or ``(B, nz)`` (keeps the weights)."""
@@ -109,7 +113,10 @@ class LatentMPC:
         return action, next_warm
 
     def act(self, z0: Tensor) -> Tensor:
-        """One MPC step that keeps the warm start in this object (call :meth:`reset` per episode).
+        """One MPC step that keeps the plan in this object (call :meth:`reset` per episode).
+
+        Plans (from scratch, or refining the carried plan) every ``config.replan_every``
+        calls; in between, the carried plan's next action is applied and ``z0`` is unused.
 
         Args:
             z0: Current latent state ``(nz,)`` or states ``(B, nz)``.
@@ -117,5 +124,12 @@ class LatentMPC:
         Returns:
             The action to apply, ``(nu,)`` or ``(B, nu)``.
         """
+        if self.warm_start is not None and self.open_loop_left > 0:
+            self.open_loop_left -= 1
+            batched = self.warm_start.dim() == 3
+            plans = self.warm_start if batched else self.warm_start[None]
+            self.warm_start = shift_plan(plans) if batched else shift_plan(plans)[0]
+            return plans[:, 0] if batched else plans[0, 0]
         action, self.warm_start = self.plan_step(z0, self.warm_start)
+        self.open_loop_left = self.config.replan_every - 1
         return action
