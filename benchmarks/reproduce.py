@@ -943,8 +943,9 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
                 and (r["env"], r["preset"], r["method"]) not in seen):
             seen[(r["env"], r["preset"], r["method"])] = r
     lines = [
-        "| env | preset | method | episode length | plan length | iLQR iters (first / MPC) "
-        "| candidates | kappa (Q = kappa I) | R | action bounds | data size "
+        "| env | preset | method | episode length | plan length (replan every) "
+        "| iLQR iters (first / MPC) | candidates (extreme) | kappa (Q = kappa I) | R "
+        "| action bounds | data size "
         "| tasks per model (task seed) | model seeds | task starts | training |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -958,8 +959,9 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
                        "validation loss")
         lines.append(
             f"| {env} | {preset} | {method} | {s.get('episode_length', '-')} "
-            f"| {p.get('plan_length')} "
-            f"| {p.get('iterations')} / {p.get('mpc_iterations')} | {p.get('num_candidates')} "
+            f"| {p.get('plan_length')} ({p.get('replan_every', 1)}) "
+            f"| {p.get('iterations')} / {p.get('mpc_iterations')} "
+            f"| {p.get('num_candidates')} ({p.get('num_extreme', 2)}) "
             f"| {p.get('kappa')} | {p.get('r_weight')} I "
             f"| [{p.get('action_low')}, {p.get('action_high')}] "
             f"| {s.get('data', {}).get('num_samples')} "
@@ -1108,8 +1110,11 @@ def write_summary(results_dir: Path) -> list[dict[str, Any]]:
         "tasks (`top-1`). The paper's LaneKeeping numbers are its TORCS domain. "
         "`k of N x M (reduced grid)`: only k of the preset's N models have been run. A preset "
         "name `base+field=value` marks runs with command-line overrides of the preset. "
-        "`oracle`: iLQR-MPC on the true state and dynamics (the ceiling); `no action`: zero "
-        "actions on the same tasks (the floor; above 0 where starts lie in the goal region).\n\n"
+        "`oracle`: the agents' iLQR-MPC settings (Evaluation settings below) on the true "
+        "state and dynamics (the ceiling of those settings); `no action`: zero actions on the "
+        "same tasks (the floor; above 0 where starts lie in the goal region). "
+        "`[planner rN]`: rows evaluated by an older planner revision, with that revision's "
+        "oracle; they are history, not comparable with the current rows.\n\n"
         + "\n".join(sections)
         + "\n## Evaluation settings\n\n"
         + settings_table(rows)
@@ -1309,6 +1314,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="Skip the no-action floor (zero actions on the same tasks).")
     parser.add_argument("--floor", dest="floor", action="store_true",
                         help="Run the no-action floor even with --no-oracle.")
+    parser.add_argument("--references-only", action="store_true",
+                        help="Run only the oracle (ceiling) and no-action (floor) rows: no "
+                             "training, minutes on a CPU.")
     parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
     parser.add_argument(
         "--data-dir",
@@ -1382,6 +1390,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["env_noise_levels"] = {}
         preset = preset.override(**changes)
         runs = expand_grid(preset, include_oracle=not args.no_oracle, include_floor=args.floor)
+        if args.references_only:
+            runs = [run for run in runs if run.method in REFERENCE_METHODS]
+            if not runs:
+                raise SystemExit("--references-only with --no-oracle --no-floor leaves no run.")
         if args.status:
             print("\n".join(training_progress(results_dir, run) for run in runs))
         pending = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
