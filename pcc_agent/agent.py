@@ -40,6 +40,7 @@ from pcc_agent.planning import PLANNER_REVISION
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.ilqr import plan
+from pcc_agent.planning.mpc import shift_plan
 from pcc_agent.presets import (
     DataConfig,
     EnvPreset,
@@ -571,7 +572,7 @@ class PCCAgent:
         low = torch.as_tensor(self.env.action_space.low, device=self.device)
         high = torch.as_tensor(self.env.action_space.high, device=self.device)
         actions = torch.clamp(u_plan[:, 0], low, high).cpu().numpy().astype(np.float32)
-        next_plans = torch.cat([u_plan[:, 1:], u_plan[:, -1:]], dim=1).cpu().numpy()
+        next_plans = shift_plan(u_plan).cpu().numpy()
         if config.replan_every == 1:
             return (actions[0] if single else actions), next_plans
         left = np.where(open_loop, steps_left - 1, config.replan_every - 1).astype(np.int64)
