@@ -10,7 +10,7 @@ Targets (one core): >= 10,000 steps/s Planar, >= 3,000 pendulum, cart-pole and a
 sampler at >= 10x the public reference sampler (Planar 14,700 samples/s, Pendulum 15,000,
 CartPole 12,400, 3-link 2,120).
 
-Results go to ``benchmarks/results/env_speed.json`` (a list of rows: env, steps_per_second,
+Results go to ``results/env_speed.json`` (a list of rows: env, steps_per_second,
 samples_per_second, threads, machine, steps, samples).
 
 Usage:

@@ -18,9 +18,9 @@ tasks), and whether the held-out states coded nearest the goal are near it in st
 puts a distant state there). Nothing is retrained and no control task is rerun.
 
 Usage:
-    python -m pcc_bench.latent_diagnostics --results-dir benchmarks/results/reproduce \
+    python -m pcc_bench.latent_diagnostics --results-dir results/reproduce \
         --preset paper-fast-long --env pcc/Planar-v0 \
-        --output benchmarks/results/latent_diagnostics/Planar-v0_paper-fast-long
+        --output results/latent_diagnostics/Planar-v0_paper-fast-long
 """
 
 from __future__ import annotations

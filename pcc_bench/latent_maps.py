@@ -4,9 +4,9 @@ The grid draws the maps of its first two models per method as it trains; this dr
 any saved agent afterwards (the best model, a failed one), one PNG per checkpoint, named
 after the checkpoint file.
 
-Usage (``C=benchmarks/results/reproduce/checkpoints/runs/paper-fast/pcc_Planar-v0/noise0.0``):
+Usage (``C=results/reproduce/checkpoints/runs/paper-fast/pcc_Planar-v0/noise0.0``):
     python -m pcc_bench.latent_maps $C/pcc/seed3.pt $C/pcc/seed6.pt \
-        --out benchmarks/results/reproduce/latent_maps/paper-fast --prefix Planar-v0_pcc_noise0.0_
+        --out results/reproduce/latent_maps/paper-fast --prefix Planar-v0_pcc_noise0.0_
 """
 
 from __future__ import annotations

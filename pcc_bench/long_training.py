@@ -13,7 +13,7 @@ keeps what it measured; the training itself is not resumable.
 
 Usage:
     python -m pcc_bench.long_training --seed 1 --epochs 1000 --eval-at 150 250 500 750 1000 \
-        --output benchmarks/results/long_training/planar_pcc_fast_seed1.json
+        --output results/long_training/planar_pcc_fast_seed1.json
 """
 
 from __future__ import annotations

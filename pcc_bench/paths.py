@@ -7,4 +7,4 @@ from pathlib import Path
 #: Where the commands write by default (relative to the working directory).
 DEFAULT_RESULTS_ROOT = Path("pcc_results")
 #: The results committed to the repository (present in a source checkout, not in the wheel).
-COMMITTED_RESULTS_DIR = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+COMMITTED_RESULTS_DIR = Path(__file__).resolve().parents[1] / "results"

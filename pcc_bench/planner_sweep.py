@@ -17,7 +17,7 @@ never to choose).
 
 Examples:
     python -m pcc_bench.planner_sweep --oracle pcc/CartPole-v0 --plan-lengths 10 50
-        --replan-every 1 5 --kappas 10 1000 --out benchmarks/results/planner_sweep/cp.json
+        --replan-every 1 5 --kappas 10 1000 --out results/planner_sweep/cp.json
     python -m pcc_bench.planner_sweep CHECKPOINT --plan-lengths 10 20 40 --kappas 1 10
 """
 

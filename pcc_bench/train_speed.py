@@ -10,7 +10,7 @@ does not depend on image content).
 ``--converge`` instead trains PCC on Planar with the paper's settings (validation split, early
 stopping) and reports the epochs and wall time until early stopping.
 
-Results go to ``benchmarks/results/train_speed.json`` (a list of rows: env, method, variant,
+Results go to ``results/train_speed.json`` (a list of rows: env, method, variant,
 seconds_per_epoch, samples_per_second, device, threads, num_samples, batch_size, ...; and the
 1-minute load average before / after the measurement: on a shared machine, more torch threads
 than idle cores make timings collapse, so ``--threads 1`` is the robust setting there).

@@ -40,8 +40,8 @@ observations need 3-4x less. ``--buffer-size`` changes it.
 
 Examples:
     python -m pcc_bench.vs_sac --env pcc/Planar-v0 --steps 20000 --checkpoints 2000 5000 \
-        10000 20000 --seeds 0 1 2 --results-dir benchmarks/results/vs_sac \
-        --reproduce-dir benchmarks/results/reproduce
+        10000 20000 --seeds 0 1 2 --results-dir results/vs_sac \
+        --reproduce-dir results/reproduce
     python -m pcc_bench.vs_sac --env pcc/Planar-v0 --aggregate-only
 """
 
