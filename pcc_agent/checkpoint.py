@@ -20,7 +20,6 @@ import json
 import os
 import pickle
 import re
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,8 +27,15 @@ from typing import Any
 
 import torch
 
+from pcc_agent.io import atomic_torch_save, atomic_write_text
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ModelConfig
+
+#: The atomic writers live in :mod:`pcc_agent.io`; re-exported here for older imports.
+__all__ = [
+    "Checkpoint", "CheckpointError", "atomic_torch_save", "atomic_write_text", "load_checkpoint",
+    "load_model", "load_weights", "save_checkpoint", "torch_load_safely",
+]
 
 FORMAT_NAME = "pcc_agent.checkpoint"
 FORMAT_VERSION = 1
@@ -76,38 +82,6 @@ class Checkpoint:
         )
         load_weights(model, self)
         return model.to(device)
-
-
-def atomic_torch_save(obj: Any, path: str | os.PathLike[str]) -> None:
-    """``torch.save`` to a temporary file beside ``path``, fsync, then ``os.replace``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            torch.save(obj, handle)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def atomic_write_text(text: str, path: str | os.PathLike[str]) -> None:
-    """Write a text file atomically (temporary file + ``os.replace``)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def save_checkpoint(

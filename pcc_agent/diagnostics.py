@@ -34,7 +34,7 @@ local minimum to a short window, even when every other diagnostic is good.
 :func:`goal_aliasing` asks whether the states coded nearest the goal's code are near the goal
 at all: where the latent map folds, a distant state shares the goal's low cost.
 
-On Planar (``benchmarks/latent_diagnostics.py``, docs/training.md) the consistency error
+On Planar (``pcc_bench/latent_diagnostics.py``, docs/training.md) the consistency error
 tells the models that control well from those that do not.
 """
 

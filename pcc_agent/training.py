@@ -28,11 +28,11 @@ import torch
 
 from pcc_agent.checkpoint import (
     CheckpointError,
-    atomic_write_text,
     load_checkpoint,
     load_weights,
     save_checkpoint,
 )
+from pcc_agent.io import atomic_write_text, sb3_logger
 from pcc_agent.losses import METHODS, TransitionBatch, get_loss
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import TrainConfig
@@ -262,16 +262,7 @@ class Trainer:
     def _make_logger(self) -> Any:
         if self.log_dir is None:
             return None
-        from stable_baselines3.common.logger import configure
-
-        formats = ["stdout", "csv"]
-        try:
-            import tensorboard  # noqa: F401
-
-            formats.append("tensorboard")
-        except ImportError:
-            pass
-        return configure(str(self.log_dir), formats)
+        return sb3_logger(self.log_dir, ["stdout", "csv", "tensorboard?"])
 
     def _split(self, n: int) -> tuple[torch.Tensor, torch.Tensor]:
         split_generator = torch.Generator().manual_seed(self.config.seed + 2)

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import torch
 
-from benchmarks import latent_diagnostics as cli
 from pcc_agent import diagnostics
 from pcc_agent.diagnostics import (
     goal_aliasing,
@@ -23,6 +22,7 @@ from pcc_agent.diagnostics import (
 )
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import get_preset
+from pcc_bench import latent_diagnostics as cli
 from pcc_envs.data import collect_transitions
 
 
@@ -239,7 +239,8 @@ def test_spearman_matches_known_values():
 
 
 def test_cli_on_a_tiny_grid(tmp_path):
-    from benchmarks.reproduce import RunSpec, execute_run
+    from pcc_bench.records import RunSpec
+    from pcc_bench.runs import execute_run
 
     for seed in (0, 1, 2):
         spec = RunSpec(env_id="pcc/Planar-v0", method="pcc", seed=seed, noise_std=0.0,

@@ -6,9 +6,9 @@ import dataclasses
 
 import pytest
 
-from benchmarks import latent_maps
 from pcc_agent import PCCAgent
 from pcc_agent.presets import get_preset
+from pcc_bench import latent_maps
 
 
 def test_latent_maps_of_saved_agents(tmp_path):

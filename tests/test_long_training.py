@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from benchmarks import long_training
+from pcc_bench import long_training
 
 
 def test_long_training_evaluates_at_the_asked_epochs(tmp_path):

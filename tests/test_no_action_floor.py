@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from benchmarks import no_action_floor
+from pcc_bench import no_action_floor
 
 
 def test_zero_action_policy_is_batched_and_refuses_spaces_without_zero():

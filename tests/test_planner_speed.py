@@ -1,11 +1,11 @@
-"""benchmarks.planner_speed times each domain's own planner settings."""
+"""pcc_bench.planner_speed times each domain's own planner settings."""
 
 from __future__ import annotations
 
 import json
 
-from benchmarks import planner_speed
 from pcc_agent.presets import get_preset
+from pcc_bench import planner_speed
 
 
 def test_speed_rows_use_the_domain_presets_and_report_the_warm_up(tmp_path):

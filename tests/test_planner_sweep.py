@@ -1,4 +1,4 @@
-"""benchmarks.planner_sweep re-evaluates a saved agent under several planner settings."""
+"""pcc_bench.planner_sweep re-evaluates a saved agent under several planner settings."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import json
 
 import pytest
 
-from benchmarks import planner_sweep
 from pcc_agent import PCCAgent
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.presets import get_preset
+from pcc_bench import planner_sweep
 
 
 def test_planner_sweep_runs_every_setting(tmp_path):

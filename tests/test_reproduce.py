@@ -12,15 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.reproduce import (
-    RunSpec,
-    aggregate,
-    estimate_cost,
-    execute_run,
-    interquartile_mean,
-    load_finished_run,
-)
 from pcc_agent.planning import PLANNER_REVISION
+from pcc_bench.aggregation import aggregate, interquartile_mean
+from pcc_bench.costs import estimate_cost
+from pcc_bench.records import RunSpec, load_finished_run
+from pcc_bench.runs import execute_run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,7 +40,7 @@ def test_smoke_quick_preset_in_subprocess(tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "benchmarks.reproduce",
+        "pcc_bench.reproduce",
         "--preset",
         "quick",
         "--num-models",
@@ -93,13 +89,13 @@ def test_run_killed_mid_training_resumes_to_the_uninterrupted_result(tmp_path):
     import signal
     import time
 
-    from benchmarks.reproduce import training_checkpoint_path, training_progress
+    from pcc_bench.records import training_checkpoint_path, training_progress
 
     spec = dataclasses.replace(tiny_spec(3), max_epochs=40, patience=40)
     assert training_progress(tmp_path, spec).endswith("seed=3: not started")
     data_dir = tmp_path / "data"
     code = (
-        "from benchmarks.reproduce import RunSpec, execute_run; "
+        "from pcc_bench.records import RunSpec; from pcc_bench.runs import execute_run; "
         f"execute_run(RunSpec(**{dataclasses.asdict(spec)!r}), {str(tmp_path)!r}, "
         f"{str(data_dir)!r})"
     )
@@ -128,11 +124,11 @@ def test_run_killed_mid_training_resumes_to_the_uninterrupted_result(tmp_path):
 
 
 def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_path):
-    from benchmarks.reproduce import _resume_point
     from pcc_agent.checkpoint import load_checkpoint, save_checkpoint
     from pcc_agent.model import EmbeddingModel
     from pcc_agent.presets import get_preset
     from pcc_agent.training import train_embedding
+    from pcc_bench.records import resume_point
 
     preset = get_preset("pcc/Planar-v0")
     config = dataclasses.replace(preset.train, epochs=1, seed=0)
@@ -144,20 +140,20 @@ def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_pa
                     progress_bar=False, device="cpu", checkpoint_path=path)
     saved = load_checkpoint(path)
     # Finished: the run was killed during its control tasks; it trains again from scratch.
-    assert _resume_point(path, config, arch) is None and not path.exists()
+    assert resume_point(path, config, arch) is None and not path.exists()
     unfinished = {**saved.extra, "finished": False}
 
     def write_unfinished():
         save_checkpoint(path, model, saved.config, extra=unfinished, state=saved.state)
 
     write_unfinished()
-    assert _resume_point(path, dataclasses.replace(config, lr=1e-3), arch) is None
+    assert resume_point(path, dataclasses.replace(config, lr=1e-3), arch) is None
     assert not path.exists()  # other training settings: never continued
     write_unfinished()
     wider = {**arch, "model_config": {**arch["model_config"], "encoder_hidden": [512, 512]}}
-    assert _resume_point(path, config, wider) is None and not path.exists()
+    assert resume_point(path, config, wider) is None and not path.exists()
     write_unfinished()
-    point = _resume_point(path, config, arch)
+    point = resume_point(path, config, arch)
     assert point.epoch == 1 and point.seconds > 0
     # Written before a config field with a default existed: still continued.
     older_arch = {**saved.architecture, "model_config": {
@@ -170,9 +166,9 @@ def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_pa
     save_checkpoint(path, model, older_config, extra=unfinished, state=saved.state)
     del model.architecture
     assert load_checkpoint(path).architecture == older_arch
-    assert _resume_point(path, config, arch).epoch == 1
+    assert resume_point(path, config, arch).epoch == 1
     path.write_bytes(b"cut short")
-    assert _resume_point(path, config, arch) is None and not path.exists()
+    assert resume_point(path, config, arch) is None and not path.exists()
 
 
 def test_aggregate_all_and_top1():
@@ -205,8 +201,8 @@ def test_aggregate_all_and_top1():
 
 
 def test_standard_error_of_one_task_is_undefined_not_zero():
-    from benchmarks.reproduce import markdown_table
     from pcc_agent.evaluation import format_mean_se, standard_error
+    from pcc_bench.tables import markdown_table
 
     assert standard_error([3.0]) is None and standard_error([]) is None
     assert np.isclose(standard_error([0.0, 10.0]), 5.0)
@@ -227,10 +223,10 @@ def test_interquartile_mean():
 def test_record_of_other_settings_is_stale(tmp_path):
     spec = tiny_spec()
     path = tmp_path / spec.relative_path
-    from benchmarks.reproduce import _preset_for
     from pcc_agent.agent import PCCAgent
+    from pcc_bench.records import preset_for
 
-    agent = PCCAgent(spec.env_id, method=spec.method, preset=_preset_for(spec), seed=spec.seed)
+    agent = PCCAgent(spec.env_id, method=spec.method, preset=preset_for(spec), seed=spec.seed)
     config = json.loads(json.dumps(agent.config_dict()))  # what execute_run records
     record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": [],
               "config": config}
@@ -289,8 +285,8 @@ def test_run_with_old_planner_settings_is_reevaluated_not_retrained(tmp_path):
 
 
 def test_explicit_model_seeds_select_the_grid_cells():
-    from benchmarks.presets import REPRODUCE_PRESETS
-    from benchmarks.reproduce import expand_grid
+    from pcc_bench.grid import expand_grid
+    from pcc_bench.presets import REPRODUCE_PRESETS
 
     preset = REPRODUCE_PRESETS["paper"].replace(envs=("pcc/Planar-v0",), methods=("pcc", "e2c"),
                                                 model_seeds=(3, 7))
@@ -301,8 +297,9 @@ def test_explicit_model_seeds_select_the_grid_cells():
 
 
 def test_training_overrides_reach_the_trained_model(tmp_path):
-    from benchmarks.presets import REPRODUCE_PRESETS
-    from benchmarks.reproduce import _training_recipe, expand_grid
+    from pcc_bench.grid import expand_grid
+    from pcc_bench.presets import REPRODUCE_PRESETS
+    from pcc_bench.tables import training_recipe
 
     long = REPRODUCE_PRESETS["paper-fast-long"].replace(envs=("pcc/Planar-v0",), methods=("pcc",))
     assert {(r.max_epochs, r.patience) for r in expand_grid(long, False)} == {(1000, 100)}
@@ -310,7 +307,7 @@ def test_training_overrides_reach_the_trained_model(tmp_path):
     record = execute_run(spec, tmp_path, str(tmp_path / "data"))
     train = record["config"]["train"]
     assert (train["patience"], train["epochs"], train["flush_denormals"]) == (7, 2, True)
-    assert "subnormals flushed to zero" in _training_recipe(record["config"])
+    assert "subnormals flushed to zero" in training_recipe(record["config"])
     assert record["spec"]["patience"] == 7
     # A record from before the option counts as trained without it, never as this run.
     assert load_finished_run(tmp_path / spec.relative_path, spec) is not None
@@ -357,7 +354,7 @@ def test_stopping_the_pool_cancels_queued_runs(tmp_path):
     """An error or close() in the consumer must not train the rest of the grid."""
     import time
 
-    from benchmarks.reproduce import pool_outcomes
+    from pcc_bench.executors import pool_outcomes
 
     specs = [tiny_spec(seed) for seed in range(16)]
     outcomes = pool_outcomes(_sleepy_run, specs, 2, tmp_path)
@@ -381,8 +378,8 @@ def _start_sleepy_grid(markers: Path, seconds: float = 5.0) -> subprocess.Popen:
 
     code = (
         "import sys; sys.path.insert(0, 'tests'); from test_reproduce import _sleepy_run, "
-        "tiny_spec; from benchmarks.reproduce import _interrupt, collect_outcomes, "
-        "pool_outcomes; import signal; signal.signal(signal.SIGTERM, _interrupt); "
+        "tiny_spec; from pcc_bench.grid import collect_outcomes; from pcc_bench.executors "
+        "import interrupt, pool_outcomes; import signal; signal.signal(signal.SIGTERM, interrupt); "
         "specs = [tiny_spec(s) for s in range(8)]; "
         f"collect_outcomes(pool_outcomes(_sleepy_run, specs, 2, {str(markers)!r}, {seconds}), "
         "8)"
@@ -465,7 +462,7 @@ def test_killed_driver_leaves_no_worker_running(tmp_path):
 
 
 def test_interrupted_grid_exits_130_with_how_to_continue(tmp_path, monkeypatch, capsys):
-    import benchmarks.reproduce as reproduce
+    import pcc_bench.reproduce as reproduce
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
@@ -479,7 +476,7 @@ def test_interrupted_grid_exits_130_with_how_to_continue(tmp_path, monkeypatch, 
 
 
 def test_failed_run_is_reported_after_the_others_and_driver_writes_records(tmp_path):
-    from benchmarks.reproduce import collect_outcomes
+    from pcc_bench.grid import collect_outcomes
 
     good = [tiny_spec(0), tiny_spec(2)]
     records = [{"spec": dataclasses.asdict(s), "mean": 50.0, "train_seconds": 1.0,
@@ -493,8 +490,8 @@ def test_failed_run_is_reported_after_the_others_and_driver_writes_records(tmp_p
 
 
 def test_overrides_that_change_the_runs_rename_the_preset():
-    from benchmarks.presets import REPRODUCE_PRESETS
-    from benchmarks.reproduce import expand_grid
+    from pcc_bench.grid import expand_grid
+    from pcc_bench.presets import REPRODUCE_PRESETS
 
     paper = REPRODUCE_PRESETS["paper"]
     # Selecting cells keeps the name: these are cells of the paper grid.
@@ -515,7 +512,7 @@ def test_overrides_that_change_the_runs_rename_the_preset():
 
 
 def test_summary_says_which_table_and_when_the_grid_is_reduced():
-    from benchmarks.reproduce import _models_cell, paper_table
+    from pcc_bench.tables import models_cell, paper_table
 
     def rec(method, seed, noise=0.0):
         return {"spec": {"env_id": "pcc/Planar-v0", "method": method, "noise_std": noise,
@@ -525,23 +522,23 @@ def test_summary_says_which_table_and_when_the_grid_is_reduced():
     rows = aggregate([rec("pcc", 0), rec("pcc", 1), rec("pcc-amortized", 0),
                       rec("pcc", 0, noise=1.0)])
     by_key = {(r["method"], r["noise_std"]): r for r in rows}
-    assert _models_cell(by_key[("pcc", 0.0)]) == "2 of 10 x 2 (reduced grid)"
+    assert models_cell(by_key[("pcc", 0.0)]) == "2 of 10 x 2 (reduced grid)"
     assert [paper_table(by_key[k])[:7] for k in (("pcc", 0.0), ("pcc-amortized", 0.0),
                                                   ("pcc", 1.0))] == ["Table 1", "Table 2",
                                                                      "Table 3"]
     full = aggregate([rec("pcc", s) for s in range(10)])[0]
-    assert _models_cell(full) == "10 x 2"
+    assert models_cell(full) == "10 x 2"
     beyond = aggregate([rec("pcc", s) for s in range(12)])[0]
-    assert _models_cell(beyond) == "12 x 2 (2 beyond the preset's 10)"
+    assert models_cell(beyond) == "12 x 2 (2 beyond the preset's 10)"
 
 
 def test_oracle_record_of_other_oracle_or_planner_settings_is_stale(tmp_path):
-    from benchmarks.reproduce import _preset_for
     from pcc_agent.oracle import oracle_config_for
+    from pcc_bench.records import preset_for
 
     spec = dataclasses.replace(tiny_spec(), method="oracle", num_samples=None, max_epochs=None)
     oracle = json.loads(json.dumps(dataclasses.asdict(oracle_config_for(spec.env_id))))
-    planner = json.loads(json.dumps(dataclasses.asdict(_preset_for(spec).planner)))
+    planner = json.loads(json.dumps(dataclasses.asdict(preset_for(spec).planner)))
     record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": [],
               "config": {"oracle": oracle, "planner": planner,
                          "planner_revision": PLANNER_REVISION}}
@@ -555,14 +552,15 @@ def test_oracle_record_of_other_oracle_or_planner_settings_is_stale(tmp_path):
 
 
 def test_summary_keeps_older_planner_rows_apart_with_their_own_oracle(tmp_path):
-    from benchmarks.reproduce import NO_ACTION, _preset_for, aggregate, load_records
+    from pcc_bench.aggregation import aggregate
+    from pcc_bench.records import NO_ACTION, load_records, preset_for
 
     def write(method, seed, revision, percentages, preset="test"):
         spec = dataclasses.replace(tiny_spec(), method=method, seed=seed, preset=preset,
                                    num_samples=None, max_epochs=None)
         config = {} if method == NO_ACTION else {"planner_revision": revision}
         if method == "pcc":  # what a trained agent records (PCCAgent.config_dict)
-            preset = _preset_for(spec)
+            preset = preset_for(spec)
             config.update(train=preset.train.to_dict(), model=preset.model.to_dict(),
                           data=dataclasses.asdict(preset.data))
         record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec),
@@ -593,7 +591,7 @@ def test_summary_keeps_older_planner_rows_apart_with_their_own_oracle(tmp_path):
      (["--ray-gpus-per-task", "-1"], "must be >= 0")],
 )
 def test_bad_command_line_is_refused_before_any_run(tmp_path, capsys, args, message):
-    from benchmarks.reproduce import main
+    from pcc_bench.reproduce import main
 
     with pytest.raises(SystemExit) as exit_info:
         main([*args, "--results-dir", str(tmp_path)])
@@ -602,7 +600,7 @@ def test_bad_command_line_is_refused_before_any_run(tmp_path, capsys, args, mess
 
 
 def test_noise_variance_names_the_same_runs_as_the_presets_table3_levels(tmp_path, capsys):
-    from benchmarks.reproduce import main
+    from pcc_bench.reproduce import main
 
     def status(*noise_args):
         main(["--preset", "paper-noisy", "--envs", "pcc/Planar-v0", "--methods", "pcc",
@@ -621,8 +619,9 @@ def test_noise_variance_names_the_same_runs_as_the_presets_table3_levels(tmp_pat
 
 
 def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
-    from benchmarks.presets import REPRODUCE_PRESETS, RESTART_SEED_STRIDE
-    from benchmarks.reproduce import expand_grid, select_restarts
+    from pcc_bench.aggregation import select_restarts
+    from pcc_bench.grid import expand_grid
+    from pcc_bench.presets import REPRODUCE_PRESETS, RESTART_SEED_STRIDE
 
     best3 = REPRODUCE_PRESETS["paper-fast-long-best3"].replace(
         envs=("pcc/Planar-v0",), methods=("pcc",), model_seeds=(0, 1))
@@ -673,9 +672,10 @@ def test_restarts_preset_keeps_the_training_with_the_lowest_validation_loss():
 
 
 def test_grid_has_a_no_action_floor_per_env_and_noise_level():
-    from benchmarks import reproduce
-    from benchmarks.presets import REPRODUCE_PRESETS
-    from benchmarks.reproduce import NO_ACTION, expand_grid
+    from pcc_bench import reproduce
+    from pcc_bench.grid import expand_grid
+    from pcc_bench.presets import REPRODUCE_PRESETS
+    from pcc_bench.records import NO_ACTION
 
     preset = REPRODUCE_PRESETS["paper-noisy"].override(envs=("pcc/Planar-v0",),
                                                         methods=("pcc",), model_seeds=(0,))
@@ -696,7 +696,8 @@ def test_grid_has_a_no_action_floor_per_env_and_noise_level():
 
 
 def test_no_action_run_scores_the_starts_inside_the_goal_and_is_skipped_once_done(tmp_path):
-    from benchmarks.reproduce import NO_ACTION, markdown_table
+    from pcc_bench.records import NO_ACTION
+    from pcc_bench.tables import markdown_table
 
     # CartPole task seed 2020: the first start lies outside the goal, the second inside it.
     spec = RunSpec(env_id="pcc/CartPole-v0", method=NO_ACTION, seed=0, noise_std=0.0,

@@ -243,7 +243,7 @@ def test_decoder_bias_init_starts_from_the_mean_image():
 
 
 def test_latent_formation_benchmark_logs_r2(tmp_path):
-    from benchmarks.latent_formation import main
+    from pcc_bench.latent_formation import main
 
     out = tmp_path / "formation.json"
     main(["--epochs", "1", "--every", "1", "--probe", "200", "--data-dir", str(tmp_path),

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from benchmarks import sac_state, vs_sac
 from pcc_agent.agent import sb3_logger
+from pcc_bench import sac_state, vs_sac, vs_sac_summary
+from pcc_bench.records import NO_ACTION
 
 
 def test_vs_sac_tiny_budget(tmp_path):
@@ -32,7 +33,7 @@ def test_vs_sac_tiny_budget(tmp_path):
     assert oracle["n_tasks"] == 1 and 0.0 <= oracle["mean"] <= 100.0
     # The floor too: a Planar start is far from the goal, so zero actions never reach it.
     floor = summary["model_based"]["no-action (vs_sac)"]
-    assert floor["method"] == vs_sac.NO_ACTION and floor["n_tasks"] == 1 and floor["mean"] == 0.0
+    assert floor["method"] == NO_ACTION and floor["n_tasks"] == 1 and floor["mean"] == 0.0
     assert "| no-action (vs_sac) | - (zero actions) | 0.0 ± n/a |" in (
         out / "Planar-v0.md").read_text()
     # Finished runs are reused, not retrained.
@@ -101,10 +102,10 @@ def test_dense_reward_is_its_own_agent_and_curve(tmp_path):
 
 
 def test_model_based_points_are_per_preset(tmp_path):
-    from benchmarks.reproduce import _write_json_atomic
+    from pcc_agent.io import atomic_write_json
 
     for preset, values, n in (("paper", [10.0, 20.0], 5000), ("paper-fast", [80.0], 3000)):
-        _write_json_atomic(
+        atomic_write_json(
             tmp_path / "runs" / preset / "pcc.json",
             {
                 "format": 1,
@@ -115,29 +116,31 @@ def test_model_based_points_are_per_preset(tmp_path):
                 "config": {"data": {"num_samples": n}},
             },
         )
-    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)["model_based"]
+    points = vs_sac_summary.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)[
+        "model_based"]
     assert points["pcc (paper)"]["mean"] == 15.0 and points["pcc (paper)"]["num_samples"] == 5000
     assert points["pcc (paper-fast)"]["mean"] == 80.0
 
 
 def test_restarts_model_counts_the_data_of_every_training(tmp_path):
     """A best-of-2 model consumed two data sets: its point sits at 2 x 5000 samples."""
-    from benchmarks.reproduce import RunSpec, _preset_for, _write_json_atomic
     from pcc_agent.agent import PCCAgent
+    from pcc_agent.io import atomic_write_json
+    from pcc_bench.records import RunSpec, preset_for
 
     for seed, loss, score in ((0, 140.0, 20.0), (1000, 130.0, 70.0)):
         spec = {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0, "seed": seed,
                 "preset": "paper-fast-long", "model_variant": "fast", "num_tasks": 10,
                 "task_seed": 2020, "max_epochs": 1000, "patience": 100}
-        agent = PCCAgent(spec["env_id"], method="pcc", preset=_preset_for(RunSpec(**spec)),
+        agent = PCCAgent(spec["env_id"], method="pcc", preset=preset_for(RunSpec(**spec)),
                          seed=seed)
-        _write_json_atomic(
+        atomic_write_json(
             tmp_path / "runs" / f"seed{seed}.json",
             {"format": 1, "status": "done", "percentages": [score], "mean": score,
              "train_seconds": 1.0, "training": {"best_validation_loss": loss}, "spec": spec,
              "config": json.loads(json.dumps(agent.config_dict()))},
         )
-    summary = vs_sac.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)
+    summary = vs_sac_summary.summarize("pcc/Planar-v0", tmp_path / "none", tmp_path)
     points = summary["model_based"]
     assert points["pcc (paper-fast-long)"]["num_samples"] == 5000
     assert points["pcc (paper-fast-long-best2)"]["num_samples"] == 10000
@@ -145,29 +148,31 @@ def test_restarts_model_counts_the_data_of_every_training(tmp_path):
     assert "pcc (paper-fast-long-best3)" not in points
     # One task each: the standard error is undefined, and the table says so.
     assert points["pcc (paper-fast-long)"]["se"] is None
-    vs_sac.write_outputs(summary, tmp_path)
+    vs_sac_summary.write_outputs(summary, tmp_path)
     assert "| 20.0 ± n/a |" in (tmp_path / "Planar-v0.md").read_text()
 
 
 def test_model_based_points_on_other_tasks_are_left_out(tmp_path):
-    from benchmarks.reproduce import _write_json_atomic
+    from pcc_agent.io import atomic_write_json
 
     for name, tasks, values in (("same", [1, 2], [10.0, 30.0]), ("other", [3, 4], [90.0, 90.0])):
-        _write_json_atomic(
+        atomic_write_json(
             tmp_path / "runs" / name / "pcc.json",
             {"format": 1, "status": "done", "task_seeds": tasks, "percentages": values,
              "spec": {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0,
                       "preset": "paper"}, "config": {"data": {"num_samples": 5000}}},
         )
-    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])["model_based"]
+    points = vs_sac_summary.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])[
+        "model_based"]
     assert points["pcc (paper)"]["mean"] == 20.0 and points["pcc (paper)"]["n_tasks"] == 2
 
 
 def test_no_floor_where_the_zero_action_is_not_allowed(tmp_path, monkeypatch):
-    monkeypatch.setattr(vs_sac, "contains_zero_action", lambda space: False)
-    monkeypatch.setattr(vs_sac, "oracle_point", lambda *args: None)
-    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1])["model_based"]
-    assert not any(entry["method"] == vs_sac.NO_ACTION for entry in points.values())
+    monkeypatch.setattr(vs_sac_summary, "contains_zero_action", lambda space: False)
+    monkeypatch.setattr(vs_sac_summary, "oracle_point", lambda *args: None)
+    points = vs_sac_summary.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1])[
+        "model_based"]
+    assert not any(entry["method"] == NO_ACTION for entry in points.values())
 
 
 def _tiny_state_run(tmp_path, **kwargs):
@@ -240,12 +245,12 @@ def test_partial_run_without_its_state_is_retrained_and_checked(tmp_path, monkey
         _tiny_state_run(tmp_path)
     sac_state.state_path(record_path).unlink()
     partial = json.loads(record_path.read_text())
-    summary = vs_sac.summarize("pcc/Planar-v0", tmp_path, tmp_path / "none")
+    summary = vs_sac_summary.summarize("pcc/Planar-v0", tmp_path, tmp_path / "none")
     assert summary["sac"] == {}  # a partial run is in no mean
     assert summary["partial"] == [{"curve": "sac_state_sparse (120 steps)", "seed": 0,
                                    "steps_done": 40, "points": [
                                        {"env_steps": 40, "mean": partial["curve"][0]["mean"]}]}]
-    vs_sac.write_outputs(summary, tmp_path)
+    vs_sac_summary.write_outputs(summary, tmp_path)
     assert "seed 0, at 40 steps" in (tmp_path / "Planar-v0.md").read_text()
 
     monkeypatch.setattr(pcc_agent.evaluation, "evaluate_control", real_evaluate)
@@ -354,16 +359,19 @@ def test_sac_run_makes_no_temp_directory(tmp_path, monkeypatch):
 
 
 def test_floor_of_the_reproduction_runs_is_used_not_measured_again(tmp_path, monkeypatch):
-    from benchmarks.reproduce import NO_ACTION, _write_json_atomic
+    from pcc_agent.io import atomic_write_json
+    from pcc_bench.records import NO_ACTION
 
-    _write_json_atomic(
+    atomic_write_json(
         tmp_path / "runs" / "floor.json",
         {"format": 1, "status": "done", "task_seeds": [1, 2], "percentages": [0.0, 40.0],
          "spec": {"env_id": "pcc/Planar-v0", "method": NO_ACTION, "noise_std": 0.0,
                   "preset": "paper"}, "config": {"no_action": True}},
     )
-    monkeypatch.setattr(vs_sac, "oracle_point", lambda *args: None)
-    monkeypatch.setattr(vs_sac, "zero_action_percentages", lambda *args: pytest.fail("re-run"))
-    points = vs_sac.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])["model_based"]
+    monkeypatch.setattr(vs_sac_summary, "oracle_point", lambda *args: None)
+    monkeypatch.setattr(vs_sac_summary, "zero_action_percentages",
+                        lambda *args: pytest.fail("re-run"))
+    points = vs_sac_summary.summarize("pcc/Planar-v0", tmp_path / "sac", tmp_path, [1, 2])[
+        "model_based"]
     assert points["no-action (paper)"]["mean"] == 20.0
     assert "no-action (vs_sac)" not in points

@@ -12,13 +12,13 @@ Two modes:
 
 Settings are never chosen on the evaluation tasks: the tasks are drawn from
 ``--task-seed`` (default 2021, a validation split), and the evaluation tasks' seed (2020,
-``benchmarks.presets``) is refused unless ``--allow-evaluation-tasks`` is given (to report,
+``pcc_bench.presets``) is refused unless ``--allow-evaluation-tasks`` is given (to report,
 never to choose).
 
 Examples:
-    python -m benchmarks.planner_sweep --oracle pcc/CartPole-v0 --plan-lengths 10 50
-        --replan-every 1 5 --kappas 10 1000 --out benchmarks/results/planner_sweep/cp.json
-    python -m benchmarks.planner_sweep CHECKPOINT --plan-lengths 10 20 40 --kappas 1 10
+    python -m pcc_bench.planner_sweep --oracle pcc/CartPole-v0 --plan-lengths 10 50
+        --replan-every 1 5 --kappas 10 1000 --out results/planner_sweep/cp.json
+    python -m pcc_bench.planner_sweep CHECKPOINT --plan-lengths 10 20 40 --kappas 1 10
 """
 
 from __future__ import annotations
@@ -32,8 +32,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from benchmarks.presets import REPRODUCE_PRESETS
-from benchmarks.reproduce import _write_json_atomic
+from pcc_agent.io import atomic_write_json
+from pcc_bench.arguments import command_parser
+from pcc_bench.presets import REPRODUCE_PRESETS
 
 #: Task seed of the validation split the settings are chosen on.
 VALIDATION_TASK_SEED = 2021
@@ -60,9 +61,8 @@ def _weights(text: str) -> tuple[float, ...]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``python -m benchmarks.planner_sweep``."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.planner_sweep",
-                                     description=__doc__.split("\n\n")[0])
+    """The command line of ``python -m pcc_bench.planner_sweep``."""
+    parser = command_parser(__doc__, "pcc_bench.planner_sweep")
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument("checkpoint", type=Path, nargs="?", help="A PCCAgent file.")
     target.add_argument("--oracle", metavar="ENV_ID", help="Sweep the true-dynamics oracle.")
@@ -100,7 +100,7 @@ def settings_grid(base: Any, args: argparse.Namespace) -> list[Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m benchmarks.planner_sweep``."""
+    """Entry point of ``python -m pcc_bench.planner_sweep``."""
     parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
@@ -167,8 +167,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"goal ({row['seconds']:.0f} s)", flush=True)
         if args.out is not None:  # after every row: a cut-short sweep keeps what it measured
             done = len(rows) == len(configs) * len(weight_grid)
-            _write_json_atomic(args.out, {
-                "command": " ".join(["python -m benchmarks.planner_sweep", *argv]),
+            atomic_write_json(args.out, {
+                "command": " ".join(["python -m pcc_bench.planner_sweep", *argv]),
                 "status": "done" if done else "partial", "rows": rows})
     if args.out is not None:
         print(f"Wrote {args.out}")

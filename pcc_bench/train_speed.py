@@ -10,15 +10,15 @@ does not depend on image content).
 ``--converge`` instead trains PCC on Planar with the paper's settings (validation split, early
 stopping) and reports the epochs and wall time until early stopping.
 
-Results go to ``benchmarks/results/train_speed.json`` (a list of rows: env, method, variant,
+Results go to ``results/train_speed.json`` (a list of rows: env, method, variant,
 seconds_per_epoch, samples_per_second, device, threads, num_samples, batch_size, ...; and the
 1-minute load average before / after the measurement: on a shared machine, more torch threads
 than idle cores make timings collapse, so ``--threads 1`` is the robust setting there).
 
 Usage:
-    python -m benchmarks.train_speed                                  # Planar PCC, paper size
-    python -m benchmarks.train_speed --envs all --variants fast --max-samples 2000
-    python -m benchmarks.train_speed --converge --real-data --max-epochs 300
+    python -m pcc_bench.train_speed                                  # Planar PCC, paper size
+    python -m pcc_bench.train_speed --envs all --variants fast --max-samples 2000
+    python -m pcc_bench.train_speed --converge --real-data --max-epochs 300
 """
 
 from __future__ import annotations
@@ -36,12 +36,15 @@ from typing import Any
 import numpy as np
 import torch
 
+from pcc_agent.io import atomic_write_text
 from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ACTION_DIMS, OBS_SHAPES, PRESETS, get_preset
 from pcc_agent.training import TransitionArrays, resolve_device, train_embedding
+from pcc_bench.arguments import command_parser
+from pcc_bench.paths import COMMITTED_RESULTS_DIR
 
-DEFAULT_OUTPUT = Path(__file__).parent / "results" / "train_speed.json"
+DEFAULT_OUTPUT = COMMITTED_RESULTS_DIR / "train_speed.json"
 PLANAR = "pcc/Planar-v0"
 
 
@@ -141,7 +144,7 @@ def converge(args: argparse.Namespace) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     """Command-line entry point; returns the rows written."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_parser(__doc__, "pcc_bench.train_speed")
     parser.add_argument("--envs", nargs="+", default=[PLANAR],
                         help=f"env ids or 'all' (known: {', '.join(PRESETS)})")
     parser.add_argument("--variants", nargs="+", default=["paper"], choices=["paper", "fast"])
@@ -191,7 +194,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         new_keys = {key(row) for row in rows}
         old = [row for row in json.loads(args.output.read_text()) if key(row) not in new_keys]
         rows = old + rows
-    args.output.write_text(json.dumps(rows, indent=2) + "\n")
+    atomic_write_text(json.dumps(rows, indent=2) + "\n", args.output)
     print(f"wrote {args.output}")
     return rows
 

@@ -1,7 +1,7 @@
 """Which trained models control well, and why: latent diagnostics of every finished run.
 
 For every finished model run of a reproduction results directory whose saved agent is still there
-(``checkpoints/``, written by ``benchmarks.reproduce``), this measures
+(``checkpoints/``, written by ``pcc_bench.reproduce``), this measures
 :func:`pcc_agent.diagnostics.latent_diagnostics` on held-out transitions. The transitions
 are the same for every model: the env's uniform sampler with a seed no model was trained
 on. It writes the results beside the run's control score and best validation loss, with
@@ -18,9 +18,9 @@ tasks), and whether the held-out states coded nearest the goal are near it in st
 puts a distant state there). Nothing is retrained and no control task is rerun.
 
 Usage:
-    python -m benchmarks.latent_diagnostics --results-dir benchmarks/results/reproduce \
+    python -m pcc_bench.latent_diagnostics --results-dir results/reproduce \
         --preset paper-fast-long --env pcc/Planar-v0 \
-        --output benchmarks/results/latent_diagnostics/Planar-v0_paper-fast-long
+        --output results/latent_diagnostics/Planar-v0_paper-fast-long
 """
 
 from __future__ import annotations
@@ -34,15 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.reproduce import (
-    REFERENCE_METHODS,
-    RunSpec,
-    _write_json_atomic,
-    _write_text_atomic,
-    checkpoint_path,
-    is_restart_training,
-    load_records,
-)
+from pcc_agent.io import atomic_write_json, atomic_write_text
+from pcc_bench.aggregation import is_restart_training
+from pcc_bench.arguments import command_parser
+from pcc_bench.records import REFERENCE_METHODS, RunSpec, checkpoint_path, load_records
 
 #: Seed of the held-out transitions (the grids train on seeds 0, 1, ...).
 HELD_OUT_SEED = 1_000_000
@@ -245,9 +240,7 @@ def markdown(
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.latent_diagnostics", description=__doc__.split("\n\n")[0]
-    )
+    parser = command_parser(__doc__, "pcc_bench.latent_diagnostics")
     parser.add_argument("--results-dir", type=Path, required=True,
                         help="A reproduction results directory (runs/ and checkpoints/).")
     parser.add_argument("--env", default="pcc/Planar-v0", help="Env id of the runs.")
@@ -259,7 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m benchmarks.latent_diagnostics``."""
+    """Entry point of ``python -m pcc_bench.latent_diagnostics``."""
     arguments = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(arguments)
     if args.samples < MIN_SAMPLES:
@@ -271,13 +264,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                          f"agent under {args.results_dir}.")
     corr = correlations(rows)
     true_goal = true_goal_linearization_of(args.env)
-    _write_json_atomic(Path(f"{args.output}.json"), {
-        "command": " ".join(["python -m benchmarks.latent_diagnostics", *arguments]),
+    atomic_write_json(Path(f"{args.output}.json"), {
+        "command": " ".join(["python -m pcc_bench.latent_diagnostics", *arguments]),
         "held_out_seed": HELD_OUT_SEED, "rows": rows, "spearman": corr,
         "true_goal_linearization": true_goal,
     })
     text = markdown(rows, corr, true_goal)
-    _write_text_atomic(Path(f"{args.output}.md"), text)
+    atomic_write_text(text, Path(f"{args.output}.md"))
     print(text)
     return 0
 

@@ -14,7 +14,7 @@ Every (env, policy, reward, budget, seed) run writes one JSON file,
 ``runs/<env>/sac_<observation>[_sparse]/budget<steps>/seed<seed>.json``. Finished runs are
 skipped, and a run cut short (Ctrl-C, a crash, the end of a session) continues from its
 training state, saved beside the record every ``--save-every`` steps and after every
-evaluation (``seed<seed>.state.pt``, see :mod:`benchmarks.sac_state`). Until the run ends, its
+evaluation (``seed<seed>.state.pt``, see :mod:`pcc_bench.sac_state`). Until the run ends, its
 record file holds the curve so far with ``"status": "partial"``, never counted in the means:
 those points can be committed, whereas the state file (gigabytes for images) stays on the
 machine, and a run started afresh over them checks that it reaches the same weights at the
@@ -39,17 +39,15 @@ uint8), so the default buffer of 100,000 transitions takes about 2.6 GB; 40x40 a
 observations need 3-4x less. ``--buffer-size`` changes it.
 
 Examples:
-    python -m benchmarks.vs_sac --env pcc/Planar-v0 --steps 20000 --checkpoints 2000 5000 \
-        10000 20000 --seeds 0 1 2 --results-dir benchmarks/results/vs_sac \
-        --reproduce-dir benchmarks/results/reproduce
-    python -m benchmarks.vs_sac --env pcc/Planar-v0 --aggregate-only
+    python -m pcc_bench.vs_sac --env pcc/Planar-v0 --steps 20000 --checkpoints 2000 5000 \
+        10000 20000 --seeds 0 1 2 --results-dir results/vs_sac \
+        --reproduce-dir results/reproduce
+    python -m pcc_bench.vs_sac --env pcc/Planar-v0 --aggregate-only
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
 import os
 import sys
 import time
@@ -60,26 +58,15 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from benchmarks import sac_state
-from benchmarks.no_action_floor import contains_zero_action, zero_action_percentages
-from benchmarks.presets import REPRODUCE_PRESETS
-from benchmarks.reproduce import (
-    NO_ACTION,
-    ORACLE,
-    _positive_int,
-    _save_figure_atomic,
-    _versions,
-    _write_json_atomic,
-    _write_text_atomic,
-    is_restart_training,
-    load_records,
-    machine_info,
-    select_restarts,
-)
+from pcc_agent.io import atomic_write_json, versions
+from pcc_bench import sac_state
+from pcc_bench.arguments import command_parser, positive_int
+from pcc_bench.presets import REPRODUCE_PRESETS
+from pcc_bench.records import machine_info
+from pcc_bench.vs_sac_summary import RECORD_FORMAT, read_record, summarize, write_outputs
 
 DEFAULT_RESULTS_DIR = Path("pcc_results") / "vs_sac"
 DEFAULT_REPRODUCE_DIR = Path("pcc_results") / "reproduce"
-FORMAT = 1
 #: Environment steps between two saves of a SAC run's training state (besides evaluations).
 DEFAULT_SAVE_EVERY = 2500
 
@@ -125,7 +112,7 @@ def load_finished_sac_run(
     the agent or curve asked for). Records without a ``reward`` key were trained on the dense
     reward.
     """
-    record = _read_record(path)
+    record = read_record(path)
     if (
         record is None
         or record.get("status") != "done"
@@ -137,15 +124,6 @@ def load_finished_sac_run(
     ):
         return None
     return record
-
-
-def _read_record(path: Path) -> dict[str, Any] | None:
-    """A JSON record, or None if the file is missing, partial or not a record."""
-    try:
-        record = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError):
-        return None
-    return record if isinstance(record, dict) else None
 
 
 def sac_run_path(
@@ -197,7 +175,7 @@ def run_sac(
     """Train one SAC agent, evaluating it at every checkpoint; write and return its record.
 
     The training state is saved every ``save_every`` environment steps and after every
-    evaluation (:mod:`benchmarks.sac_state`); a run that was cut short continues from its last
+    evaluation (:mod:`pcc_bench.sac_state`); a run that was cut short continues from its last
     state, and the state file is removed once the record is written.
     """
     import stable_baselines3
@@ -241,7 +219,7 @@ def run_sac(
     model.set_logger(sb3_logger(None, []))  # SB3's default makes an empty temp dir per run
     state_file = sac_state.state_path(path)
     state = sac_state.load_state(state_file, settings)
-    earlier = _comparable_partial_points(_read_record(path), settings)
+    earlier = _comparable_partial_points(read_record(path), settings)
     if state is None and earlier:
         print(f"{path} holds a partial run of an earlier sitting ({len(earlier)} evaluations) "
               "but no training state is left: the run starts afresh, and its weights are "
@@ -265,11 +243,11 @@ def run_sac(
     def record_fields(status: str) -> dict[str, Any]:
         """What a partial and a finished record of this run both hold, as of now."""
         return {
-            "format": FORMAT, "status": status, "env_id": env_id, "observation": observation,
+            "format": RECORD_FORMAT, "status": status, "env_id": env_id, "observation": observation,
             "reward": reward, "seed": seed, "steps": steps,
             "train_seconds": earlier_seconds + time.perf_counter() - start,
             "resumed_at_steps": resumed_at, "curve": curve, "task_seeds": list(task_seed_list),
-            "machine": machine_info(), "versions": _versions(), "command": " ".join(sys.argv),
+            "machine": machine_info(), "versions": versions(), "command": " ".join(sys.argv),
         }
     last_saved = steps_done
     final_tasks: list[dict[str, Any]] = []  # the last evaluation's tasks, with trajectories
@@ -317,7 +295,7 @@ def run_sac(
                               "    OTHER weights than the earlier sitting at this step (other "
                               "kernels? see machine.simd_flags of both)")
                 if not final:  # kept in git even when the session's state file is lost
-                    _write_json_atomic(path, {**record_fields("partial"),
+                    atomic_write_json(path, {**record_fields("partial"),
                                               "steps_done": self.num_timesteps,
                                               "settings": settings})
             nonlocal last_saved
@@ -339,7 +317,7 @@ def run_sac(
         "policy_sha256": policy_digest(model),
         "torch_threads": torch.get_num_threads(),
     }
-    _write_json_atomic(path, record)
+    atomic_write_json(path, record)
     state_file.unlink(missing_ok=True)
     return record
 
@@ -382,231 +360,15 @@ def make_policy_view(model: Any, env: gym.Env, observation: str) -> Any:
     return model if observation == "image" else _StatePolicy(model, env)
 
 
-def oracle_point(env_id: str, task_seed_list: Sequence[int], results_dir: Path) -> dict | None:
-    """The oracle's record on these tasks, run here and cached if needed (None: no oracle)."""
-    from pcc_agent.evaluation import evaluate_control
-    from pcc_agent.oracle import ORACLE_CONFIGS, OracleController
-
-    config = ORACLE_CONFIGS.get(env_id)
-    if config is None:
-        return None
-    settings = json.loads(json.dumps(dataclasses.asdict(config)))
-    path = results_dir / "runs" / env_id.replace("/", "_") / "oracle.json"
-    record = _read_record(path)
-    if (record is not None and record.get("task_seeds") == list(task_seed_list)
-            and record.get("oracle") == settings):
-        return record
-    print(f"Running the oracle on {len(task_seed_list)} {env_id} tasks (the ceiling).")
-    ev = evaluate_control(lambda env: OracleController(env, config), env_id, task_seed_list,
-                          record_states=False)
-    record = {"format": FORMAT, "status": "done", "env_id": env_id, "oracle": settings,
-              "task_seeds": list(task_seed_list), "percentages": ev.percentages.tolist()}
-    _write_json_atomic(path, record)
-    return record
-
-
-def _allows_zero_action(env_id: str) -> bool:
-    """Whether ``env_id``'s action space contains the zero action (else it has no floor)."""
-    if env_id.startswith("pcc/"):
-        import pcc_envs  # noqa: F401  (registers the pcc/ ids)
-    env = gym.make(env_id)
-    try:
-        return contains_zero_action(env.action_space)
-    finally:
-        env.close()
-
-
-def summarize(
-    env_id: str,
-    results_dir: Path,
-    reproduce_dir: Path,
-    task_seed_list: Sequence[int] | None = None,
-) -> dict[str, Any]:
-    """Learning curves (mean and SE over seeds) and the model-based points, as one dict.
-
-    One curve per policy, reward and step budget, keyed
-    ``"sac_<observation>[_sparse] (<steps> steps)"``. With ``task_seed_list``, only runs
-    evaluated on exactly these tasks count, and the oracle and the no-action floor are run on
-    them if the reproduction results have none.
-    """
-    from pcc_agent.evaluation import standard_error
-
-    def same_tasks(record: dict[str, Any]) -> bool:
-        return task_seed_list is None or record.get("task_seeds") == list(task_seed_list)
-
-    curves: dict[str, Any] = {}
-    run_dir = results_dir / "runs" / env_id.replace("/", "_")
-    budget_dirs = sorted(
-        run_dir.glob("sac_*/budget[0-9]*") if run_dir.exists() else [],
-        key=lambda d: (d.parent.name, int(d.name.removeprefix("budget"))),
-    )
-    partial: list[dict[str, Any]] = []
-    for sub in budget_dirs:
-        records = [_read_record(p) for p in sorted(sub.glob("seed*.json"))]
-        records = [rec for rec in records if rec is not None and same_tasks(rec)]
-        key = f"{sub.parent.name} ({sub.name.removeprefix('budget')} steps)"
-        partial.extend(
-            {"curve": key, "seed": rec["seed"], "steps_done": rec["steps_done"],
-             "points": [{"env_steps": p["env_steps"], "mean": p["mean"]} for p in rec["curve"]]}
-            for rec in records if rec.get("status") == "partial"
-        )
-        records = [rec for rec in records if rec.get("status") == "done"]
-        if not records:
-            continue
-        points: dict[int, list[float]] = {}
-        for rec in records:
-            for point in rec["curve"]:
-                points.setdefault(point["env_steps"], []).append(point["mean"])
-        curves[key] = [
-            {
-                "env_steps": steps,
-                "mean": float(np.mean(v)),
-                "se": standard_error(v),
-                "n_seeds": len(v),
-            }
-            for steps, v in sorted(points.items())
-        ]
-    model_based: dict[str, Any] = {}
-    records = load_records(reproduce_dir) if reproduce_dir.exists() else []
-    for rec in records + select_restarts(records):
-        spec = rec["spec"]
-        if (spec["env_id"] != env_id or spec["noise_std"] != 0.0 or not same_tasks(rec)
-                or is_restart_training(spec)):
-            continue
-        # One point per (method, preset): "paper" and "paper-fast" runs are different models.
-        entry = model_based.setdefault(
-            f"{spec['method']} ({spec['preset']})",
-            {
-                "method": spec["method"],
-                "percentages": [],
-                "num_samples": None,
-                "preset": spec["preset"],
-            },
-        )
-        entry["percentages"].extend(rec["percentages"])
-        data_size = rec.get("config", {}).get("data", {}).get("num_samples")
-        # A model of a restarts preset consumed one data set per training it was chosen from.
-        trainings = len(rec.get("restarts", ())) or 1
-        entry["num_samples"] = None if data_size is None else int(data_size) * trainings
-    if task_seed_list is not None and not any(
-        entry["method"] == ORACLE for entry in model_based.values()
-    ):
-        oracle = oracle_point(env_id, task_seed_list, results_dir)
-        if oracle is not None:
-            model_based["oracle (vs_sac)"] = {"method": ORACLE, "percentages":
-                                              list(oracle["percentages"]), "num_samples": None,
-                                              "preset": "vs_sac"}
-    if (task_seed_list is not None
-            and not any(entry["method"] == NO_ACTION for entry in model_based.values())
-            and _allows_zero_action(env_id)):
-        model_based[f"{NO_ACTION} (vs_sac)"] = {
-            "method": NO_ACTION, "percentages": zero_action_percentages(env_id, task_seed_list),
-            "num_samples": None, "preset": "vs_sac"}
-    for entry in model_based.values():
-        values = np.asarray(entry.pop("percentages"))
-        entry.update(mean=float(values.mean()), se=standard_error(values), n_tasks=int(values.size))
-    return {"env": env_id, "sac": curves, "model_based": model_based, "partial": partial}
-
-
-def _curve_label(key: str) -> str:
-    """``"sac_image_sparse (20000 steps)"`` -> ``"SAC image, sparse reward, budget 20000"``."""
-    name, steps = key.split(" (")
-    parts = name.split("_")
-    reward = parts[2] if len(parts) > 2 else "dense"
-    return f"SAC {parts[1]}, {reward} reward, budget {steps.removesuffix(' steps)')}"
-
-
-def write_outputs(summary: dict[str, Any], results_dir: Path) -> None:
-    """JSON, Markdown table and learning-curve PNG for one env."""
-    import matplotlib
-
-    from pcc_agent.evaluation import format_mean_se
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    name = summary["env"].split("/")[1]
-    _write_json_atomic(results_dir / f"{name}.json", summary)
-    lines = [
-        f"## {summary['env']}\n",
-        "| method | env samples | % steps in goal (mean ± SE) | n |",
-        "|---|---|---|---|",
-    ]
-    for label, entry in sorted(summary["model_based"].items()):
-        samples = {ORACLE: "- (true dynamics)", NO_ACTION: "- (zero actions)"}.get(
-            entry["method"], entry["num_samples"])
-        lines.append(
-            f"| {label} | {samples} | {format_mean_se(entry['mean'], entry['se'])} "
-            f"| {entry['n_tasks']} tasks |"
-        )
-    for policy, curve in summary["sac"].items():
-        for p in curve:
-            lines.append(
-                f"| {policy} | {p['env_steps']} | {format_mean_se(p['mean'], p['se'])} "
-                f"| {p['n_seeds']} seeds |"
-            )
-    if summary.get("partial"):
-        lines += ["", "Runs in progress (not in the rows above; the same command continues "
-                  "them from their training state, or from scratch where it is lost):", ""]
-        lines += [
-            f"- {_curve_label(run['curve'])}, seed {run['seed']}, at {run['steps_done']:,} steps: "
-            + ", ".join(f"{p['mean']:.1f}% at {p['env_steps']:,}" for p in run["points"])
-            for run in summary["partial"]
-        ]
-    _write_text_atomic(results_dir / f"{name}.md", "\n".join(lines) + "\n")
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    for policy, curve in summary["sac"].items():
-        x = [p["env_steps"] for p in curve]
-        y = np.array([p["mean"] for p in curve])
-        e = np.array([np.nan if p["se"] is None else p["se"] for p in curve])
-        ax.plot(x, y, marker="o", label=_curve_label(policy))
-        ax.fill_between(x, y - e, y + e, alpha=0.2)
-    for run in summary.get("partial", []):  # drawn apart from the means they are not in
-        ax.plot([p["env_steps"] for p in run["points"]], [p["mean"] for p in run["points"]],
-                linestyle="--", marker=".",
-                label=f"{_curve_label(run['curve'])}, seed {run['seed']} (in progress)")
-    model_based = sorted(summary["model_based"].items())
-    oracles = [entry for _, entry in model_based if entry["method"] == ORACLE]
-    if oracles:  # one ceiling, whatever preset evaluated it
-        ax.axhline(oracles[0]["mean"], color="k", linestyle="--", label="oracle (true dynamics)")
-    floors = [entry for _, entry in model_based if entry["method"] == NO_ACTION]
-    if floors:
-        ax.axhline(floors[0]["mean"], color="0.5", linestyle=":", label="no action (floor)")
-    points = [(k, e) for k, e in model_based
-              if e["method"] not in (ORACLE, NO_ACTION) and e["num_samples"]]
-    # Points share the data-set size: spread them a little along the log axis to keep them apart.
-    for i, (label, entry) in enumerate(points):
-        dodge = 1.0 + 0.04 * (i - (len(points) - 1) / 2)
-        ax.errorbar(
-            entry["num_samples"] * dodge,
-            entry["mean"],
-            yerr=np.nan if entry["se"] is None else entry["se"],
-            fmt="s",
-            capsize=3,
-            label=f"{label}, {entry['n_tasks']} tasks",
-        )
-    ax.set_xscale("log")
-    ax.set_xlabel("environment samples")
-    ax.set_ylabel("% of steps in goal")
-    ax.set_title(f"{summary['env']}: SAC vs embed-to-control")
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    fig.tight_layout()
-    _save_figure_atomic(fig, results_dir / f"{name}.png")
-    plt.close(fig)
-    print("\n".join(lines))
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.vs_sac", description=__doc__.split("\n\n")[0]
-    )
+    parser = command_parser(__doc__, "pcc_bench.vs_sac")
     parser.add_argument("--env", default="pcc/Planar-v0", help="Registered env id.")
-    parser.add_argument("--steps", type=_positive_int, default=100_000,
+    parser.add_argument("--steps", type=positive_int, default=100_000,
                         help="SAC environment steps.")
     parser.add_argument(
         "--checkpoints",
-        type=_positive_int,
+        type=positive_int,
         nargs="+",
         default=None,
         help="Env-step counts at which SAC is evaluated (default: the PCC "
@@ -624,15 +386,15 @@ def build_parser() -> argparse.ArgumentParser:
         "the goal) or 'sparse' (1 per step in the goal region, the metric itself).",
     )
     parser.add_argument(
-        "--num-tasks", type=_positive_int, default=REPRODUCE_PRESETS["paper"].num_tasks,
+        "--num-tasks", type=positive_int, default=REPRODUCE_PRESETS["paper"].num_tasks,
         help="Control tasks per evaluation (the reproduction pipeline's task seeds).",
     )
     parser.add_argument(
-        "--buffer-size", type=_positive_int, default=100_000,
+        "--buffer-size", type=positive_int, default=100_000,
         help="Replay buffer in transitions (100,000 80x80x2 transitions take about 2.6 GB).",
     )
     parser.add_argument(
-        "--save-every", type=_positive_int, default=DEFAULT_SAVE_EVERY,
+        "--save-every", type=positive_int, default=DEFAULT_SAVE_EVERY,
         help="Environment steps between saves of a run's training state (also saved after "
         "every evaluation); a run cut short continues from its last state.",
     )
@@ -651,7 +413,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m benchmarks.vs_sac``."""
+    """Entry point of ``python -m pcc_bench.vs_sac``."""
     parser = build_parser()
     args = parser.parse_args(argv)
     beyond = [c for c in args.checkpoints or [] if c > args.steps]

@@ -17,13 +17,12 @@ more intra-op threads only add synchronization overhead; one thread per planner 
 several environments or engineers sharing a machine should use.
 
 Usage:
-    python -m benchmarks.planner_speed                 # every domain + plan-length sweep
-    python -m benchmarks.planner_speed --envs planar --steps 40
+    python -m pcc_bench.planner_speed                 # every domain + plan-length sweep
+    python -m pcc_bench.planner_speed --envs planar --steps 40
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import platform
@@ -33,8 +32,11 @@ from pathlib import Path
 
 import torch
 
+from pcc_agent.io import atomic_write_text
 from pcc_agent.planning import LatentMPC, MLPDynamics, PlannerConfig, QuadraticCost
 from pcc_agent.presets import get_preset
+from pcc_bench.arguments import command_parser
+from pcc_bench.paths import COMMITTED_RESULTS_DIR
 
 # domain: (env id, latent_dim, action_dim, transition hidden sizes) from the paper's
 # architectures.
@@ -113,8 +115,8 @@ def measure(env: str, steps: int, seed: int, plan_length: int | None = None,
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of ``python -m benchmarks.planner_speed``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    """Entry point of ``python -m pcc_bench.planner_speed``."""
+    parser = command_parser(__doc__, "pcc_bench.planner_speed")
     parser.add_argument("--envs", nargs="+", default=list(PRESETS), choices=list(PRESETS))
     parser.add_argument("--sweep", nargs="*", type=int, default=list(SWEEP_PLAN_LENGTHS),
                         help=f"plan lengths for the {SWEEP_ENV} (8-d latent) sweep; empty: none")
@@ -122,7 +124,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output", type=Path,
-                        default=Path(__file__).parent / "results" / "planner_speed.json")
+                        default=COMMITTED_RESULTS_DIR / "planner_speed.json")
     args = parser.parse_args(argv)
 
     torch.set_num_threads(args.threads)
@@ -143,7 +145,7 @@ def main(argv: list[str] | None = None) -> None:
     args.output.parent.mkdir(parents=True, exist_ok=True)
     payload = {
         "benchmark": "planner_speed",
-        "command": "python -m benchmarks.planner_speed" + (
+        "command": "python -m pcc_bench.planner_speed" + (
             " " + " ".join(argv) if argv else ""),
         "torch": torch.__version__,
         "python": platform.python_version(),
@@ -152,7 +154,7 @@ def main(argv: list[str] | None = None) -> None:
         "warmup_ms": round(warmup_ms, 1),
         "rows": rows,
     }
-    args.output.write_text(json.dumps(payload, indent=2) + "\n")
+    atomic_write_text(json.dumps(payload, indent=2) + "\n", args.output)
     print(f"wrote {args.output}")
 
 

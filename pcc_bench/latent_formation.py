@@ -7,14 +7,13 @@ chart of the plane, near 0 that it is still collapsed. Also logs the validation 
 spread of the latent means and the mean encoder standard deviation.
 
 Usage:
-    python -m benchmarks.latent_formation --epochs 60
-    python -m benchmarks.latent_formation --epochs 60 --variant fast
-    python -m benchmarks.latent_formation --epochs 60 --model input_standardization=true
+    python -m pcc_bench.latent_formation --epochs 60
+    python -m pcc_bench.latent_formation --epochs 60 --variant fast
+    python -m pcc_bench.latent_formation --epochs 60 --model input_standardization=true
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -25,9 +24,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from pcc_agent.io import atomic_write_text
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import get_preset
 from pcc_agent.training import train_embedding
+from pcc_bench.arguments import command_parser
 
 ENV_ID = "pcc/Planar-v0"
 
@@ -62,7 +63,7 @@ def position_r2(model: EmbeddingModel, obs: torch.Tensor, states: np.ndarray) ->
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = command_parser(__doc__, "pcc_bench.latent_formation")
     parser.add_argument("--epochs", type=int, default=60)
     parser.add_argument("--every", type=int, default=5)
     parser.add_argument("--variant", default="paper", choices=["paper", "fast"])
@@ -102,11 +103,11 @@ def main(argv: list[str] | None = None) -> None:
                     progress_bar=False, epoch_callback=log)
     if args.output is not None:
         args.output.parent.mkdir(parents=True, exist_ok=True)
-        payload = {"command": "python -m benchmarks.latent_formation "
+        payload = {"command": "python -m pcc_bench.latent_formation "
                    + " ".join(argv if argv is not None else sys.argv[1:]),
                    "model_config": model_config.to_dict(), "train_config": train_config.to_dict(),
                    "rows": rows}
-        args.output.write_text(json.dumps(payload, indent=1) + "\n")
+        atomic_write_text(json.dumps(payload, indent=1) + "\n", args.output)
 
 
 if __name__ == "__main__":

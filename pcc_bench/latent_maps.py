@@ -4,9 +4,9 @@ The grid draws the maps of its first two models per method as it trains; this dr
 any saved agent afterwards (the best model, a failed one), one PNG per checkpoint, named
 after the checkpoint file.
 
-Usage (``C=benchmarks/results/reproduce/checkpoints/runs/paper-fast/pcc_Planar-v0/noise0.0``):
-    python -m benchmarks.latent_maps $C/pcc/seed3.pt $C/pcc/seed6.pt \
-        --out benchmarks/results/reproduce/latent_maps/paper-fast --prefix Planar-v0_pcc_noise0.0_
+Usage (``C=results/reproduce/checkpoints/runs/paper-fast/pcc_Planar-v0/noise0.0``):
+    python -m pcc_bench.latent_maps $C/pcc/seed3.pt $C/pcc/seed6.pt \
+        --out results/reproduce/latent_maps/paper-fast --prefix Planar-v0_pcc_noise0.0_
 """
 
 from __future__ import annotations
@@ -16,10 +16,12 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from pcc_bench.arguments import command_parser
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_parser(__doc__, "pcc_bench.latent_maps")
     parser.add_argument("checkpoints", type=Path, nargs="+", help="Agents saved by PCCAgent.save.")
     parser.add_argument("--out", type=Path, required=True, help="Folder for the PNG files.")
     parser.add_argument("--prefix", default="", help="Prepended to each PNG's name.")
@@ -28,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m benchmarks.latent_maps``."""
+    """Entry point of ``python -m pcc_bench.latent_maps``."""
     args = build_parser().parse_args(argv)
     from pcc_agent.agent import PCCAgent
     from pcc_agent.plots import plot_env_latent_map

@@ -5,62 +5,33 @@ floor. On some domains the start states begin inside or near the goal region (Ca
 near upright), so a controller that does nothing already scores above 0%, and a learned
 controller is only useful where it beats this number. Same tasks, task seeds, episode
 lengths and evaluation function (:func:`pcc_agent.evaluation.evaluate_control`) as
-``benchmarks.reproduce``.
+``pcc_bench.reproduce``.
 
 Usage:
-    python -m benchmarks.no_action_floor                       # every env, preset 'paper'
-    python -m benchmarks.no_action_floor --envs pcc/CartPole-v0 --noise 1.0
+    python -m pcc_bench.no_action_floor                       # every env, preset 'paper'
+    python -m pcc_bench.no_action_floor --envs pcc/CartPole-v0 --noise 1.0
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-from benchmarks.presets import ALL_ENVS, REPRODUCE_PRESETS
-from benchmarks.reproduce import _write_json_atomic, _write_text_atomic
+from pcc_agent.io import atomic_write_json, atomic_write_text
+from pcc_bench.arguments import command_parser
+from pcc_bench.paths import COMMITTED_RESULTS_DIR
+from pcc_bench.presets import ALL_ENVS, REPRODUCE_PRESETS
+from pcc_bench.zero_action import (  # noqa: F401 - re-exported: the floor's policy
+    ZeroActionPolicy,
+    contains_zero_action,
+    zero_action_percentages,
+)
 
-DEFAULT_OUTPUT = Path("benchmarks") / "results" / "no_action_floor"
-
-
-def contains_zero_action(action_space: gym.spaces.Box) -> bool:
-    """Whether the zero action lies inside the bounds of ``action_space``."""
-    return bool(np.all((action_space.low <= 0.0) & (action_space.high >= 0.0)))
-
-
-class ZeroActionPolicy:
-    """An SB3-style policy that always returns the zero action (batched, like a VecEnv's)."""
-
-    def __init__(self, action_space: gym.spaces.Box) -> None:
-        if not contains_zero_action(action_space):
-            raise ValueError(f"the zero action is outside the action space {action_space}")
-        self.action_shape = action_space.shape
-
-    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
-                deterministic: bool = True) -> tuple[np.ndarray, None]:
-        """Zeros for each observation of the batch (SB3's ``predict`` signature)."""
-        batch = len(observation) if isinstance(observation, np.ndarray) else 1
-        return np.zeros((batch, *self.action_shape), dtype=np.float32), None
-
-
-def zero_action_percentages(env_id: str, task_seed_list: Sequence[int],
-                            noise_std: float = 0.0) -> list[float]:
-    """Per-task percentage of steps in goal with zero actions, one per task seed.
-
-    Raises ``ValueError`` if the env's action space does not contain the zero action.
-    """
-    from pcc_agent.evaluation import evaluate_control
-
-    env_kwargs = {"noise_std": noise_std} if noise_std else None
-    ev = evaluate_control(lambda env: ZeroActionPolicy(env.action_space), env_id,
-                          list(task_seed_list), env_kwargs=env_kwargs, record_states=False)
-    return ev.percentages.tolist()
+DEFAULT_OUTPUT = COMMITTED_RESULTS_DIR / "no_action_floor"
 
 
 def measure_floor(env_id: str, num_tasks: int, task_seed: int,
@@ -90,8 +61,7 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     from pcc_agent.evaluation import format_mean_se
 
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.no_action_floor",
-                                     description=__doc__.split("\n\n")[0])
+    parser = command_parser(__doc__, "pcc_bench.no_action_floor")
     parser.add_argument("--envs", nargs="+", default=list(ALL_ENVS), choices=ALL_ENVS)
     parser.add_argument("--preset", default="paper", choices=sorted(REPRODUCE_PRESETS),
                         help="Reproduction preset whose tasks (number, seed) are used.")
@@ -111,10 +81,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         rows.append(row)
     # Suffixes are appended, not swapped: "--output floor_v1.0" writes floor_v1.0.json.
     json_path, md_path = (args.output.with_name(args.output.name + ext) for ext in (".json", ".md"))
-    _write_json_atomic(json_path,
+    atomic_write_json(json_path,
                        {"preset": args.preset, "rows": rows,
-                        "command": " ".join(["python -m benchmarks.no_action_floor", *argv])})
-    _write_text_atomic(md_path, format_table(rows))
+                        "command": " ".join(["python -m pcc_bench.no_action_floor", *argv])})
+    atomic_write_text(format_table(rows), md_path)
     print(f"Wrote {json_path} and {md_path}")
     return 0
 

@@ -10,12 +10,12 @@ Targets (one core): >= 10,000 steps/s Planar, >= 3,000 pendulum, cart-pole and a
 sampler at >= 10x the public reference sampler (Planar 14,700 samples/s, Pendulum 15,000,
 CartPole 12,400, 3-link 2,120).
 
-Results go to ``benchmarks/results/env_speed.json`` (a list of rows: env, steps_per_second,
+Results go to ``results/env_speed.json`` (a list of rows: env, steps_per_second,
 samples_per_second, threads, machine, steps, samples).
 
 Usage:
-    python -m benchmarks.env_speed                      # all ids, one thread
-    python -m benchmarks.env_speed --envs pcc/Planar-v0 --samples 50000
+    python -m pcc_bench.env_speed                      # all ids, one thread
+    python -m pcc_bench.env_speed --envs pcc/Planar-v0 --samples 50000
 """
 
 from __future__ import annotations
@@ -28,11 +28,15 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pcc_agent.io import atomic_write_text
+from pcc_bench.arguments import command_parser
+from pcc_bench.paths import COMMITTED_RESULTS_DIR
+
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = command_parser(__doc__, "pcc_bench.env_speed")
     parser.add_argument("--envs", nargs="*", default=None, help="ids (default: all registered)")
     parser.add_argument("--steps", type=int, default=4000, help="env steps per timed run")
     parser.add_argument("--samples", type=int, default=20000, help="samples per timed run")
@@ -42,7 +46,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--repeats", type=int, default=3, help="timed runs; the best is kept")
     parser.add_argument("--threads", type=int, default=1, help="numpy/OpenCV threads")
     parser.add_argument(
-        "--output", type=Path, default=Path(__file__).parent / "results" / "env_speed.json"
+        "--output", type=Path, default=COMMITTED_RESULTS_DIR / "env_speed.json"
     )
     return parser.parse_args(argv)
 
@@ -108,7 +112,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         print(json.dumps(row))
         rows.append(row)
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps(rows, indent=2) + "\n")
+    atomic_write_text(json.dumps(rows, indent=2) + "\n", args.output)
     print(f"wrote {args.output}")
     return rows
 

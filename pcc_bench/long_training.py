@@ -12,8 +12,8 @@ Every evaluation is appended to ``--output`` as it finishes (atomically), so a r
 keeps what it measured; the training itself is not resumable.
 
 Usage:
-    python -m benchmarks.long_training --seed 1 --epochs 1000 --eval-at 150 250 500 750 1000 \
-        --output benchmarks/results/long_training/planar_pcc_fast_seed1.json
+    python -m pcc_bench.long_training --seed 1 --epochs 1000 --eval-at 150 250 500 750 1000 \
+        --output results/long_training/planar_pcc_fast_seed1.json
 """
 
 from __future__ import annotations
@@ -29,13 +29,14 @@ from typing import Any
 
 import torch
 
-from benchmarks.presets import REPRODUCE_PRESETS
-from benchmarks.reproduce import _versions, _write_json_atomic
+from pcc_agent.io import atomic_write_json, versions
+from pcc_bench.arguments import command_parser
+from pcc_bench.presets import REPRODUCE_PRESETS
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_parser(__doc__, "pcc_bench.long_training")
     parser.add_argument("--env", default="pcc/Planar-v0")
     parser.add_argument("--method", default="pcc")
     parser.add_argument("--variant", default="fast", choices=["paper", "fast"],
@@ -53,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m benchmarks.long_training``."""
+    """Entry point of ``python -m pcc_bench.long_training``."""
     args = build_parser().parse_args(argv)
     if args.epochs < 1 or any(e < 1 or e > args.epochs for e in args.eval_at):
         raise SystemExit(f"--eval-at epochs must be in [1, {args.epochs}], got {args.eval_at}.")
@@ -72,7 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     agent = PCCAgent(args.env, method=args.method, preset=preset, seed=args.seed,
                      data_cache_dir=args.data_dir)
     record: dict[str, Any] = {
-        "command": "python -m benchmarks.long_training "
+        "command": "python -m pcc_bench.long_training "
         + " ".join(argv if argv is not None else sys.argv[1:]),
         "env_id": args.env,
         "method": args.method,
@@ -80,7 +81,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "seed": args.seed,
         "task_seeds": seeds,
         "planner_revision": PLANNER_REVISION,
-        "versions": _versions(),
+        "versions": versions(),
         "config": agent.config_dict(),
         "evaluations": [],
         "status": "running",
@@ -105,7 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "se": evaluation.standard_error,
         }
         record["evaluations"].append(row)
-        _write_json_atomic(args.output, record)
+        atomic_write_json(args.output, record)
         print(f"epoch {epoch}: val loss {row['val_loss']:.1f}, {row['mean']:.1f}% in goal "
               f"{row['percentages']}", flush=True)
         return True
@@ -113,7 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     agent.learn(total_timesteps=args.num_samples, callback=evaluate_now, progress_bar=False)
     record["status"] = "done"
     record["training"] = agent.train_summary()
-    _write_json_atomic(args.output, record)
+    atomic_write_json(args.output, record)
     return 0
 
 

@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from pcc_agent.checkpoint import CheckpointError, atomic_torch_save, torch_load_safely
+from pcc_agent.checkpoint import CheckpointError, torch_load_safely
+from pcc_agent.io import atomic_torch_save
 
 STATE_FORMAT = 1
 

@@ -1,1 +1,0 @@
-"""Benchmarks reproducing the PCC paper."""

@@ -1,0 +1,123 @@
+"""Evaluate a saved agent on its env's evaluation tasks: % of steps in goal, task by task.
+
+The tasks are the reproduction protocol's (``--num-tasks`` start states drawn with
+``--task-seed``; by default the 10 evaluation tasks of the ``paper`` preset), the metric the
+paper's (percentage of an episode's steps whose true state is in the goal region). Beside
+each task: the oracle (the planner on the true dynamics: the ceiling of the env's planner
+settings) and the no-action floor (zero actions), read from the reproduction records in
+``--references-dir`` where they exist for the same tasks and the current planner.
+
+Examples:
+    python -m pcc_bench.evaluate pcc_results/models/Planar-v0_pcc_seed0.pt
+    python -m pcc_bench.evaluate planar_e2c.pt --num-tasks 3 --json planar_e2c_eval.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from pcc_bench.arguments import command_parser, non_negative_float, positive_int
+from pcc_bench.paths import COMMITTED_RESULTS_DIR
+from pcc_bench.presets import REPRODUCE_PRESETS
+from pcc_bench.records import NO_ACTION, ORACLE, RunSpec, load_finished_run
+from pcc_bench.tables import terminal_table
+
+DEFAULT_REFERENCES_DIR = COMMITTED_RESULTS_DIR / "reproduce"
+_PAPER = REPRODUCE_PRESETS["paper"]
+
+
+def reference_percentages(
+    references_dir: Path, env_id: str, method: str, seeds: Sequence[int], noise_std: float = 0.0
+) -> dict[int, float] | None:
+    """A reference controller's % in goal per task seed, from a reproduction record.
+
+    Looks for the ``paper`` preset's record of ``method`` (``"oracle"`` or ``"no-action"``)
+    on ``env_id`` with the same tasks; None when there is none, or it is stale (another
+    planner revision or other planner settings than the env's preset).
+    """
+    spec = RunSpec(env_id=env_id, method=method, seed=0, noise_std=float(noise_std),
+                   num_tasks=len(seeds), task_seed=_PAPER.task_seed, model_variant="paper",
+                   preset="paper")
+    record = load_finished_run(references_dir / spec.relative_path, spec)
+    if record is None:
+        return None
+    by_seed = {int(s): float(p) for s, p in zip(record["task_seeds"], record["percentages"])}
+    return by_seed if all(int(s) in by_seed for s in seeds) else None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface."""
+    parser = command_parser(__doc__, "pcc_bench.evaluate")
+    parser.add_argument("model", type=Path, help="An agent saved by PCCAgent.save / pcc train.")
+    parser.add_argument("--env", default=None, metavar="ENV_ID",
+                        help="The env to control (default: the one the agent was trained on).")
+    parser.add_argument("--num-tasks", type=positive_int, default=_PAPER.num_tasks,
+                        help="Control tasks (default: %(default)s).")
+    parser.add_argument("--task-seed", type=int, default=_PAPER.task_seed,
+                        help="Base seed of the tasks (default: %(default)s, the evaluation "
+                        "tasks; the references are only shown for these).")
+    parser.add_argument("--noise", type=non_negative_float, default=0.0, metavar="STD",
+                        help="Process noise standard deviation of the env (default: 0).")
+    parser.add_argument("--references-dir", type=Path, default=DEFAULT_REFERENCES_DIR,
+                        help="Reproduction results with the oracle and no-action records "
+                        "(default: the repository's committed results).")
+    parser.add_argument("--json", type=Path, default=None,
+                        help="Also write the per-task results to this JSON file.")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m pcc_bench.evaluate`` and ``pcc evaluate``."""
+    args = build_parser().parse_args(argv)
+    if not args.model.exists() and not args.model.with_suffix(".pt").exists():
+        raise SystemExit(f"No saved agent at {args.model}.")
+    import numpy as np
+
+    from pcc_agent.agent import PCCAgent
+    from pcc_agent.evaluation import evaluate_control, format_mean_se, task_seeds
+    from pcc_agent.io import atomic_write_json
+
+    env_kwargs = {"noise_std": args.noise} if args.noise else {}
+    agent = PCCAgent.load(args.model, env=args.env)
+    env_id = args.env or agent.env_id
+    seeds = task_seeds(args.task_seed, args.num_tasks)
+    evaluation = evaluate_control(agent, env_id, seeds, env_kwargs, record_states=False)
+    ours = evaluation.percentages
+    references: dict[str, dict[int, float] | None] = {
+        method: (reference_percentages(args.references_dir, env_id, method, seeds, args.noise)
+                 if args.task_seed == _PAPER.task_seed else None)
+        for method in (ORACLE, NO_ACTION)
+    }
+
+    def cell(method: str, seed: int) -> str:
+        values = references[method]
+        return "-" if values is None else f"{values[seed]:.1f}"
+
+    rows: list[list[Any]] = [[k + 1, seed, f"{value:.1f}", cell(ORACLE, seed),
+                              cell(NO_ACTION, seed)] for k, (seed, value) in
+                             enumerate(zip(seeds, ours))]
+    means = {m: (None if v is None else float(np.mean([v[s] for s in seeds])))
+             for m, v in references.items()}
+    rows.append(["mean", "", format_mean_se(evaluation.mean, evaluation.standard_error),
+                 *("-" if means[m] is None else f"{means[m]:.1f}" for m in (ORACLE, NO_ACTION))])
+    print(f"{agent.method} on {env_id}: % of steps in goal per task\n(model: {args.model})")
+    print(terminal_table(["task", "seed", agent.method, "oracle", "no action"], rows))
+    if all(v is None for v in references.values()):
+        print("No oracle or no-action records of these tasks (the references are kept for the "
+              f"{_PAPER.num_tasks}\nevaluation tasks) in --references-dir {args.references_dir}")
+    if args.json is not None:
+        atomic_write_json(args.json, {
+            "model": str(args.model), "env_id": env_id, "method": agent.method,
+            "noise_std": args.noise, "task_seeds": seeds, "percentages": ours.tolist(),
+            "mean": evaluation.mean, "oracle": means[ORACLE], "no_action": means[NO_ACTION],
+        })
+        print(f"Wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

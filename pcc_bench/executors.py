@@ -1,0 +1,224 @@
+"""Where the runs of a grid execute: one interface, three backends.
+
+An :class:`Executor` calls ``run(spec, *args)`` for every spec and yields ``(spec, record or
+error)`` in completion order; a failed run is an outcome, not an exception, so one failure
+never stops the others. :class:`SerialExecutor` runs in this process; :class:`ProcessExecutor`
+in a local pool of worker processes (one core each, ended with the driver at Ctrl-C or
+``kill -9``); :class:`RayExecutor` as Ray tasks on a local or remote Ray cluster (``pip
+install 'pcc-control[ray]'``). Stopping the iteration early (Ctrl-C, ``close()``) cancels
+the queued runs on every backend.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import InvalidStateError, ProcessPoolExecutor, as_completed
+from typing import Any
+
+from pcc_bench.worker_lifetime import end_with_driver
+
+#: What a backend reports per run, in completion order: the record, or the run's error.
+Outcome = tuple[Any, dict[str, Any] | Exception]
+
+
+def worker_init() -> None:
+    """Set up a worker for one run: one OpenMP and one torch thread."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def _pool_worker_init(parent_ignores_sigint: bool = False, driver_pid: int | None = None,
+                      forked_by_main_thread: bool = False) -> None:
+    """A pool worker ends at Ctrl-C (the terminal signals the whole process group).
+
+    Python's default would raise KeyboardInterrupt inside the run, which the pool reports as
+    that run's result before the worker takes the next queued run. The run's training
+    checkpoint is kept, so re-running the grid continues it. A grid started in the background
+    by a non-interactive shell ignores SIGINT; its workers then ignore it too, so a stray
+    SIGINT cannot kill them under a main process that keeps going. A worker also ends when
+    the driver ``driver_pid`` ends without stopping it (``kill -9``): see
+    :func:`pcc_bench.worker_lifetime.end_with_driver`.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN if parent_ignores_sigint else signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the main process's graceful handler
+    if driver_pid is not None:
+        end_with_driver(driver_pid, forked_by_main_thread)
+    worker_init()
+
+
+def interrupt(signum: int, frame: Any) -> None:
+    """Signal handler: stop the grid the way Ctrl-C does (raise KeyboardInterrupt)."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _ignore_cancelled_future_race(args: threading.ExceptHookArgs) -> None:
+    """Thread excepthook: drop the executor manager's error on futures we cancelled.
+
+    At Ctrl-C the workers die with the whole process group while the main process cancels the
+    queued futures; Python 3.11's pool manager then tries to mark those cancelled futures as
+    failed and prints an ``InvalidStateError`` traceback after the clean exit message (Python
+    3.12 ignores that case itself). Every other thread error goes to the default hook.
+    """
+    manager = type(args.thread).__name__ == "_ExecutorManagerThread"
+    if not (manager and isinstance(args.exc_value, InvalidStateError)):
+        threading.__excepthook__(args)
+
+
+def pool_outcomes(
+    run: Any, todo: Sequence[Any], workers: int, *args: Any
+) -> Iterator[Outcome]:
+    """``run(spec, *args)`` for every spec in a pool of ``workers`` processes.
+
+    If the consumer stops early (Ctrl-C, an error, ``close()``), the queued runs are
+    cancelled instead of being trained silently before the program exits. If this process is
+    killed outright (``kill -9``), the workers end with it.
+    """
+    parent_ignores_sigint = signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    # The workers are created by the submits below, in this same thread.
+    main_thread = threading.current_thread() is threading.main_thread()
+    pool = ProcessPoolExecutor(
+        max_workers=workers, initializer=_pool_worker_init,
+        initargs=(parent_ignores_sigint, os.getpid(), main_thread),
+    )
+    futures: dict[Any, Any] = {}
+    try:
+        futures = {pool.submit(run, spec, *args): spec for spec in todo}
+        for future in as_completed(futures):
+            try:
+                outcome: dict[str, Any] | Exception = future.result()
+            except Exception as error:  # one failed run must not stop or hang the grid
+                outcome = error
+            yield futures[future], outcome
+    except BaseException:
+        # Cancel each queued future here: the pool's own cancel_futures can miss them when
+        # the executor object is collected before its manager thread acts on the flag.
+        threading.excepthook = _ignore_cancelled_future_race
+        for future in futures:
+            future.cancel()
+        pool.shutdown(wait=False, cancel_futures=True)
+        # Runs in progress stop too (their last epoch checkpoint is kept), also when the signal
+        # reached only this process (SIGTERM, or SIGINT sent to one pid). The grid's pool
+        # workers are the only child processes the driver starts.
+        for worker in multiprocessing.active_children():
+            worker.terminate()
+        print("Stopped: queued runs cancelled.", file=sys.stderr, flush=True)
+        raise
+    pool.shutdown()
+
+
+class Executor(ABC):
+    """Runs ``run(spec, *args)`` for every spec; yields ``(spec, record or error)``."""
+
+    #: Whether the driver must write the records it receives (the runs execute elsewhere).
+    driver_writes: bool = False
+
+    @abstractmethod
+    def outcomes(
+        self, run: Callable[..., dict[str, Any]], todo: Sequence[Any], *args: Any
+    ) -> Iterator[Outcome]:
+        """``run(spec, *args)`` for each spec of ``todo``, in completion order.
+
+        Closing the iterator before its end cancels the runs not started yet.
+        """
+
+
+class SerialExecutor(Executor):
+    """The runs one after another in this process (one torch thread)."""
+
+    def outcomes(
+        self, run: Callable[..., dict[str, Any]], todo: Sequence[Any], *args: Any
+    ) -> Iterator[Outcome]:
+        """See :meth:`Executor.outcomes`."""
+        worker_init()
+        for spec in todo:
+            try:
+                yield spec, run(spec, *args)
+            except Exception as error:  # one failed run must not stop the grid
+                yield spec, error
+
+
+class ProcessExecutor(Executor):
+    """A local pool of ``workers`` processes, one core each (see :func:`pool_outcomes`)."""
+
+    def __init__(self, workers: int) -> None:
+        if workers < 1:
+            raise ValueError(f"workers must be at least 1, got {workers}")
+        self.workers = workers
+
+    def outcomes(
+        self, run: Callable[..., dict[str, Any]], todo: Sequence[Any], *args: Any
+    ) -> Iterator[Outcome]:
+        """See :meth:`Executor.outcomes`."""
+        return pool_outcomes(run, todo, self.workers, *args)
+
+
+def _ray_call(run: Callable[..., dict[str, Any]], spec: Any, *args: Any) -> dict[str, Any]:
+    worker_init()
+    return run(spec, *args)
+
+
+class RayExecutor(Executor):
+    """The runs as Ray tasks: one CPU and ``gpus_per_task`` GPUs each.
+
+    Args:
+        address: The cluster (``"auto"``, ``"ray://host:10001"``); None starts or joins a
+            local Ray instance.
+        gpus_per_task: GPUs reserved per run (0: Ray hides the GPUs, runs train on CPU).
+        num_cpus: CPUs of a local instance started here (None: all of this machine's).
+    """
+
+    driver_writes = True  # Ray workers may run on other machines
+
+    def __init__(self, address: str | None = None, gpus_per_task: float = 0.0,
+                 num_cpus: int | None = None) -> None:
+        if gpus_per_task < 0:
+            raise ValueError(f"gpus_per_task must be >= 0, got {gpus_per_task}")
+        self.address = address
+        self.gpus_per_task = gpus_per_task
+        self.num_cpus = num_cpus
+
+    def outcomes(
+        self, run: Callable[..., dict[str, Any]], todo: Sequence[Any], *args: Any
+    ) -> Iterator[Outcome]:
+        """See :meth:`Executor.outcomes`."""
+        try:
+            import ray
+        except ImportError as exc:  # depends on the optional extra
+            raise SystemExit("The Ray backend needs Ray: pip install 'pcc-control[ray]'") from exc
+        if not ray.is_initialized():
+            local = {} if self.address is not None or self.num_cpus is None else {
+                "num_cpus": self.num_cpus}
+            ray.init(address=self.address, **local)
+        task = ray.remote(num_cpus=1, num_gpus=self.gpus_per_task)(_ray_call)
+        pending = {task.remote(run, spec, *args): spec for spec in todo}
+        try:
+            while pending:
+                (ref,), _ = ray.wait(list(pending), num_returns=1)
+                spec = pending.pop(ref)
+                try:
+                    outcome: dict[str, Any] | Exception = ray.get(ref)
+                except Exception as error:  # a failed task must not lose the others' results
+                    outcome = error
+                yield spec, outcome
+        except BaseException:
+            for ref in pending:
+                ray.cancel(ref)
+            raise
+
+
+def make_executor(backend: str = "process", workers: int = 1, ray_address: str | None = None,
+                  ray_gpus_per_task: float = 0.0) -> Executor:
+    """The executor of a backend name: ``"process"`` (serial for one worker) or ``"ray"``."""
+    if backend == "ray":
+        return RayExecutor(ray_address, ray_gpus_per_task)
+    if backend != "process":
+        raise ValueError(f"unknown backend {backend!r}: use 'process' or 'ray'")
+    return SerialExecutor() if workers <= 1 else ProcessExecutor(workers)

@@ -1,0 +1,93 @@
+"""Train one agent (PCC, E2C, RCE or an ablation) on an environment and save it.
+
+The agent collects its data set with the env's sampler (cached on disk, see ``--data-dir``),
+trains its embedding with the preset of the env (``--variant``), shows a progress bar over
+epochs and saves itself to ``--output``; ``pcc evaluate`` then runs its control tasks.
+
+Examples:
+    python -m pcc_bench.train --env pcc/Planar-v0
+    python -m pcc_bench.train --env pcc/Planar-v0 --method e2c --samples 2000 --epochs 20 \
+        --output planar_e2c.pt
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from pcc_bench.arguments import command_parser, known_envs, positive_int
+from pcc_bench.paths import DEFAULT_RESULTS_ROOT
+
+DEFAULT_MODELS_DIR = DEFAULT_RESULTS_ROOT / "models"
+
+
+def default_output(env_id: str, method: str, seed: int) -> Path:
+    """Where ``pcc train`` saves an agent by default."""
+    return DEFAULT_MODELS_DIR / f"{env_id.split('/')[-1]}_{method}_seed{seed}.pt"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface."""
+    from pcc_agent.losses import METHODS
+
+    parser = command_parser(__doc__, "pcc_bench.train")
+    parser.add_argument("--env", default="pcc/Planar-v0", metavar="ENV_ID",
+                        help="A registered env id (default: %(default)s; with a preset: "
+                        f"{', '.join(known_envs())}).")
+    parser.add_argument("--method", default="pcc", choices=sorted(METHODS),
+                        help="The embedding objective (default: %(default)s).")
+    parser.add_argument("--variant", default="fast", choices=("paper", "fast"),
+                        help="Preset variant: 'paper' (the paper's networks) or 'fast' "
+                        "(CPU-friendly; default).")
+    parser.add_argument("--seed", type=int, default=0, help="Seed of data, weights, batches.")
+    parser.add_argument("--samples", type=positive_int, default=None,
+                        help="Transitions in the data set (default: the preset's).")
+    parser.add_argument("--epochs", type=positive_int, default=None,
+                        help="Epoch cap (default: the preset's; early stopping may end sooner).")
+    parser.add_argument("--device", default="auto", help="'auto', 'cpu', 'cuda', ...")
+    parser.add_argument("--data-dir", default=None,
+                        help="Dataset cache (default: PCC_DATA_DIR or "
+                        "~/.cache/pcc_control/datasets).")
+    parser.add_argument("--output", type=Path, default=None,
+                        help=f"The saved agent (default: {DEFAULT_MODELS_DIR}/"
+                        "<env>_<method>_seed<seed>.pt).")
+    parser.add_argument("--no-progress", action="store_true", help="No progress bar.")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m pcc_bench.train`` and ``pcc train``."""
+    args = build_parser().parse_args(argv)
+    from pcc_agent.agent import PCCAgent
+    from pcc_agent.presets import get_preset
+
+    preset = get_preset(args.env, args.variant) if args.env in known_envs() else args.variant
+    if args.epochs is not None:
+        if isinstance(preset, str):
+            raise SystemExit(f"--epochs needs a preset; {args.env!r} has none.")
+        preset = dataclasses.replace(preset, train=dataclasses.replace(preset.train,
+                                                                       epochs=args.epochs))
+    agent = PCCAgent(args.env, method=args.method, preset=preset, seed=args.seed,
+                     device=args.device, data_cache_dir=args.data_dir)
+    start = time.perf_counter()
+    agent.learn(total_timesteps=args.samples, progress_bar=not args.no_progress)
+    seconds = time.perf_counter() - start
+    output = args.output or default_output(agent.env_id, args.method, args.seed)
+    agent.save(output)
+    summary = agent.train_summary()
+    loss = summary.get("best_validation_loss")
+    print(f"Trained {args.method} on {agent.env_id} in {seconds:.0f} s: "
+          f"{summary.get('epochs')} epochs, best validation loss "
+          f"{'-' if loss is None else f'{loss:.3g}'} at epoch {summary.get('best_epoch')}"
+          + (f" ({summary['message'].rstrip('.')})" if summary.get("message") else "")
+          + ".")
+    print(f"Saved {output}\nEvaluate it: pcc evaluate {output}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
