@@ -34,6 +34,8 @@ SPEED_COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("pcc_bench.train_speed", "seconds per training epoch (and to converge)"),
     "planner": ("pcc_bench.planner_speed", "milliseconds per MPC step of each domain's planner"),
     "env": ("pcc_bench.env_speed", "env steps and data-set samples per second"),
+    "control": ("pcc_bench.time_to_control",
+                "time to control: % in goal against minutes of training"),
 }
 
 EXAMPLES = """examples:

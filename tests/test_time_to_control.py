@@ -1,0 +1,56 @@
+"""pcc_bench.time_to_control: minute marks, the kept weights, resumable records, the rows."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pcc_bench import time_to_control as ttc
+
+
+def _record(method: str, recipe: str, seed: int, marks: dict[float, list[float]]) -> dict:
+    return {"env": "pcc/Planar-v0", "method": method, "recipe": recipe, "seed": seed,
+            "marks": [{"minutes": m, "percentages": p} for m, p in marks.items()]}
+
+
+def test_rows_average_all_tasks_of_all_models_per_mark():
+    records = [_record("pcc", "fast", 0, {1.0: [0.0, 10.0], 2.0: [50.0, 70.0]}),
+               _record("pcc", "fast", 1, {1.0: [20.0, 30.0], 2.0: [50.0, 30.0]}),
+               _record("e2c", "fast", 0, {1.0: [5.0, 5.0], 2.0: [5.0, 5.0]})]
+    rows = ttc.aggregate(records)
+    pcc = [r for r in rows if r["method"] == "pcc"]
+    assert [r["train_minutes"] for r in pcc] == [1.0, 2.0]
+    assert pcc[0]["mean_all"] == 15.0 and pcc[1]["mean_all"] == 50.0
+    assert all(r["n_models"] == 2 and r["n_tasks"] == 4 for r in pcc)
+    e2c = [r for r in rows if r["method"] == "e2c"]
+    assert e2c[0]["n_models"] == 1 and e2c[0]["se"] == 0.0
+
+
+def test_recipe_label_names_an_overridden_learning_rate():
+    assert ttc.recipe_label("fast", None) == "fast"
+    assert ttc.recipe_label("fast", 1.5e-3) == "fast+lr=0.0015"
+
+
+def test_nonpositive_minutes_are_refused(tmp_path):
+    with pytest.raises(SystemExit, match="--minutes must be positive"):
+        ttc.main(["--minutes", "0", "--results-dir", str(tmp_path)])
+
+
+def test_a_tiny_run_keeps_a_model_per_mark_and_resumes(tmp_path, capsys):
+    args = ["--envs", "pcc/Planar-v0", "--seeds", "0", "--minutes", "1e-6", "2e-6",
+            "--max-epochs", "2", "--patience", "0", "--num-tasks", "1", "--workers", "1",
+            "--results-dir", str(tmp_path)]
+    assert ttc.main(args) == 0
+    (path,) = tmp_path.glob("Planar-v0/*.json")
+    record = json.loads(path.read_text())
+    # Both marks pass during the first epoch: training stops there, both keep its weights.
+    assert record["epochs_trained"] == 1
+    assert [m["minutes"] for m in record["marks"]] == [1e-6, 2e-6]
+    assert all(m["epoch"] == 1 and m["best_epoch"] == 1 for m in record["marks"])
+    assert all(len(m["percentages"]) == 1 for m in record["marks"])
+    summary = json.loads((tmp_path / "time_to_control.json").read_text())
+    assert [r["train_minutes"] for r in summary["rows"]] == [1e-6, 2e-6]
+    assert (tmp_path / "time_to_control.png").stat().st_size > 0
+    assert ttc.main(args) == 0  # the model is done: nothing is trained again
+    assert "1 of 1 models already done; 0 to train" in capsys.readouterr().out
