@@ -44,6 +44,7 @@ from pcc_bench.records import (
     load_records,
     training_progress,
 )
+from pcc_bench.showcase import show_control
 from pcc_bench.tables import (
     markdown_table,
     paper_table,
@@ -246,6 +247,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                   "command again to continue.", file=sys.stderr)
             return 130
     write_summary(results_dir)
+    if not args.aggregate_only:
+        show_control(runs, results_dir)
     return 0
 
 
