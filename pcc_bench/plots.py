@@ -38,12 +38,16 @@ def summary_bar_chart(rows: list[dict[str, Any]], path: Path) -> None:
     paper_se = [r["paper_all"][1] if r["paper_all"] else 0 for r in rows]
     ax.bar(x + 0.2, paper, 0.4, yerr=paper_se, label="paper (all models)", capsize=3)
     for xi, r in zip(x, rows):
+        # The value above each of our bars: a row at 0 % is then a readable "0.0", not a gap.
+        ax.text(xi - 0.2, r["mean_all"] + 1, f"{r['mean_all']:.1f}", ha="center",
+                va="bottom", fontsize=7)
         if r["oracle_mean"] is not None:
             ax.hlines(r["oracle_mean"], xi - 0.45, xi + 0.45, colors="k", linestyles="--")
         if r.get("floor_mean"):  # a floor of 0 would only hide the axis
             ax.hlines(r["floor_mean"], xi - 0.45, xi + 0.45, colors="0.4", linestyles=":")
     ax.set_xticks(x, labels, fontsize=7)
     ax.set_ylabel("% of steps in goal")
+    ax.set_ylim(0, 105)
     ax.set_title("Control from pixels (dashed: oracle on the true state; dotted: zero actions)")
     ax.legend()
     fig.tight_layout()
