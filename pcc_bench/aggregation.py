@@ -203,5 +203,6 @@ def _is_training_of(spec: dict[str, Any], preset: ReproducePreset) -> bool:
         and spec.get("max_epochs") == preset.max_epochs
         and spec.get("patience") == preset.patience
         and spec.get("flush_denormals") == preset.flush_denormals
+        and spec.get("learning_rate") == preset.learning_rate
         and spec.get("num_samples") == preset.num_samples.get(spec.get("env_id", ""))
     )

@@ -25,7 +25,7 @@ class CostEstimate:
 def _cost_key(spec: RunSpec, with_method: bool = True) -> tuple[Any, ...]:
     """Runs with the same key train the same kind of model for the same epoch budget."""
     budget = (spec.env_id, spec.model_variant, spec.num_samples, spec.max_epochs, spec.patience,
-              spec.flush_denormals)
+              spec.flush_denormals, spec.learning_rate)
     return (*budget, spec.method) if with_method else budget
 
 

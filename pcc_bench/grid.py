@@ -61,6 +61,7 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True,
                             max_epochs=preset.max_epochs,
                             patience=preset.patience,
                             flush_denormals=preset.flush_denormals,
+                            learning_rate=preset.learning_rate,
                             **common,
                         )
                     )

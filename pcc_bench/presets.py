@@ -75,6 +75,8 @@ class ReproducePreset:
         patience: Override of the early-stopping patience in epochs (None: the env preset's).
         flush_denormals: Train with subnormal floats flushed to zero (None: off, as every
             committed run; see ``pcc_agent.presets.TrainConfig.flush_denormals``).
+        learning_rate: Override of Adam's learning rate (None: the env preset's, the paper's
+            5e-4).
         task_seed: Base seed of the control tasks (the same tasks for every model and method).
         model_seeds: Explicit model seeds to run (None: ``0 .. num_models - 1``).
         restarts: Trainings per model. With more than one, model ``m`` is the one of its
@@ -97,6 +99,7 @@ class ReproducePreset:
     max_epochs: int | None = None
     patience: int | None = None
     flush_denormals: bool | None = None
+    learning_rate: float | None = None
     task_seed: int = 2020
     model_seeds: tuple[int, ...] | None = None
     restarts: int = 1
@@ -159,7 +162,7 @@ RESTART_SEED_STRIDE = 1000
 
 #: Preset fields that change what a run trains or evaluates (see ReproducePreset.override).
 RUN_FIELDS: tuple[str, ...] = ("num_tasks", "task_seed", "num_samples", "max_epochs", "patience",
-                               "flush_denormals")
+                               "flush_denormals", "learning_rate")
 
 
 def _tag_value(value: Any) -> str:

@@ -47,6 +47,7 @@ class RunSpec:
     max_epochs: int | None = None
     patience: int | None = None
     flush_denormals: bool | None = None
+    learning_rate: float | None = None
 
     @property
     def relative_path(self) -> Path:
@@ -209,6 +210,8 @@ def preset_for(spec: RunSpec) -> Any:
         preset = replace(preset, train=replace(preset.train, patience=spec.patience))
     if spec.flush_denormals:
         preset = replace(preset, train=replace(preset.train, flush_denormals=True))
+    if spec.learning_rate is not None:
+        preset = replace(preset, train=replace(preset.train, lr=spec.learning_rate))
     if spec.num_samples is not None:
         preset = replace(preset, data=replace(preset.data, num_samples=spec.num_samples))
     return replace(preset, data=replace(preset.data, noise_std=spec.noise_std))

@@ -31,7 +31,13 @@ from typing import Any
 
 from pcc_agent.io import atomic_write_json, atomic_write_text
 from pcc_bench.aggregation import aggregate, select_restarts
-from pcc_bench.arguments import command_parser, known_envs, non_negative_float, positive_int
+from pcc_bench.arguments import (
+    command_parser,
+    known_envs,
+    non_negative_float,
+    positive_float,
+    positive_int,
+)
 from pcc_bench.costs import estimate_cost
 from pcc_bench.executors import interrupt
 from pcc_bench.grid import expand_grid, run_grid
@@ -124,6 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
         "for image models whose weight decay drives unlit pixels' weights subnormal "
         "(Pendulum); other weights than without it, so its runs and rows are labelled.",
     )
+    parser.add_argument("--learning-rate", type=positive_float, metavar="LR",
+                        help="Override Adam's learning rate (runs and rows are labelled).")
     noise = parser.add_mutually_exclusive_group()
     noise.add_argument(
         "--noise", type=non_negative_float, nargs="+", metavar="STD",
@@ -210,6 +218,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["patience"] = args.patience
         if args.flush_denormals:
             changes["flush_denormals"] = True
+        if args.learning_rate is not None:
+            changes["learning_rate"] = args.learning_rate
         noise_stds = args.noise or [variance**0.5 for variance in args.noise_variance or ()]
         if noise_stds:
             changes["noise_levels"] = tuple(noise_stds)

@@ -88,6 +88,8 @@ def training_recipe(settings: dict[str, Any]) -> str:
         changes.append(f"{train['warmup_epochs']}-epoch KL warm-up")
     if train.get("flush_denormals"):
         changes.append("subnormals flushed to zero")
+    if "lr" in train and train["lr"] != 5e-4:  # the paper's Adam learning rate
+        changes.append(f"learning rate {train['lr']:g}")
     recipe = "paper recipe" if not changes else "paper recipe + " + " + ".join(changes)
     if not train:
         return recipe
