@@ -18,9 +18,8 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
+import itertools
 import os
-import sys
 import warnings
 from pathlib import Path
 from typing import Any
@@ -29,18 +28,17 @@ import gymnasium as gym
 import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
-from stable_baselines3.common.logger import HumanOutputFormat, Logger, configure
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
-import pcc_agent
 from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_weights, save_checkpoint
+from pcc_agent.io import sb3_logger, versions
 from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.planning import PLANNER_REVISION
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
-from pcc_agent.planning.ilqr import plan
-from pcc_agent.planning.mpc import shift_plan
+from pcc_agent.planning.mpc import LatentMPC
 from pcc_agent.presets import (
     DataConfig,
     EnvPreset,
@@ -52,20 +50,6 @@ from pcc_agent.presets import (
 from pcc_agent.training import TrainResult, resolve_device, train_embedding
 
 __all__ = ["PCCAgent", "collect_random_rollouts", "sb3_logger"]
-
-
-def sb3_logger(folder: str | None, formats: list[str]) -> Logger:
-    """An SB3 logger writing ``formats`` ("stdout", "csv", "tensorboard", ...) under ``folder``.
-
-    Without a folder only "stdout" (or nothing) is allowed, and no directory is made: SB3's own
-    ``configure(None, ...)`` creates an empty ``SB3-<date>`` directory in the temp dir on
-    every call, one per training run.
-    """
-    if folder is not None:
-        return configure(folder, formats)
-    if any(fmt != "stdout" for fmt in formats):
-        raise ValueError(f"logger formats {formats} write files and need a folder")
-    return Logger(folder=None, output_formats=[HumanOutputFormat(sys.stdout)] if formats else [])
 
 
 def collect_random_rollouts(
@@ -155,17 +139,73 @@ class PCCAgent:
         self.set_env(env)
         assert self.env is not None
         self.env_id = self.env.spec.id if self.env.spec is not None else "custom"
-        self.preset = self._with_env_noise(self._resolve_preset(preset))
+        self._preset = self._with_env_noise(self._resolve_preset(preset))
         if planner is not None:
-            self.preset = dataclasses.replace(self.preset, planner=planner)
+            self._preset = dataclasses.replace(self._preset, planner=planner)
         obs_shape = self.env.observation_space.shape
         self.obs_shape: tuple[int, ...] = tuple(int(s) for s in obs_shape)
         self.action_dim = int(self.env.action_space.shape[0])
-        model_config = model_config_for_method(self.preset.model, method)
-        self.preset = dataclasses.replace(self.preset, model=model_config)
+        model_config = model_config_for_method(self._preset.model, method)
+        self._preset = dataclasses.replace(self._preset, model=model_config)
         self.model = self._build_model(model_config)
-        self._goal_obs = None if goal_obs is None else self._check_obs(goal_obs, single=True)
+        self._goal_obs: np.ndarray | None = None
+        self._goal_version = 0
         self._plan_generator = torch.Generator().manual_seed(self.seed)
+        self._mpc: LatentMPC | None = None
+        self._mpc_key: tuple[Any, ...] | None = None
+        if goal_obs is not None:
+            self.set_goal(goal_obs)
+
+    # ------------------------------------------------------------------ settings
+    @property
+    def preset(self) -> EnvPreset:
+        """The agent's settings: model, training, data and planner (read-only).
+
+        Change the planner settings with :meth:`set_planner`.
+        """
+        return self._preset
+
+    @preset.setter
+    def preset(self, value: EnvPreset) -> None:
+        raise AttributeError(
+            "PCCAgent.preset is read-only: change the planner settings with "
+            "agent.set_planner(config) or agent.set_planner(replan_every=..., ...)."
+        )
+
+    @property
+    def planner(self) -> PlannerConfig:
+        """The planner settings ``predict`` uses (change them with :meth:`set_planner`)."""
+        return self._preset.planner
+
+    def set_planner(self, config: PlannerConfig | None = None, **changes: Any) -> None:
+        """Change the planner settings; the next :meth:`predict` plans with them.
+
+        The planner's random draws (the initial candidate plans) restart from the agent's
+        seed, so the agent then plans exactly as a freshly loaded one with these settings.
+        ``set_planner()`` without arguments only restarts the draws.
+
+        Args:
+            config: The new settings; default: the current ones.
+            **changes: Fields of :class:`~pcc_agent.planning.PlannerConfig` to change
+                (``plan_length=20``, ``replan_every=5``, ...), applied on top of ``config``.
+
+        Raises:
+            TypeError: An unknown field name.
+            ValueError: Inconsistent settings (from ``PlannerConfig``'s validation).
+
+        Example:
+            >>> agent.set_planner(plan_length=20, replan_every=5)  # doctest: +SKIP
+        """
+        base = self._preset.planner if config is None else config
+        if not isinstance(base, PlannerConfig):
+            raise TypeError(f"config must be a PlannerConfig, got {type(base).__name__}.")
+        unknown = set(changes) - {f.name for f in dataclasses.fields(PlannerConfig)}
+        if unknown:
+            raise TypeError(f"Unknown planner settings {sorted(unknown)}; see PlannerConfig.")
+        planner = dataclasses.replace(base, **changes)
+        self._preset = dataclasses.replace(self._preset, planner=planner)
+        self._plan_generator.manual_seed(self.seed)
+        self._mpc = None
 
     # ------------------------------------------------------------------ set-up helpers
     def _with_env_noise(self, preset: EnvPreset) -> EnvPreset:
@@ -248,9 +288,7 @@ class PCCAgent:
         if self._logger is None:
             formats = ["stdout"] if self.verbose else []
             if self.tensorboard_log:
-                formats += ["csv"]
-                if importlib.util.find_spec("tensorboard") is not None:
-                    formats += ["tensorboard"]
+                formats += ["csv", "tensorboard?"]  # TensorBoard when it is installed
             self._logger = sb3_logger(self.tensorboard_log or None, formats)
         return self._logger
 
@@ -341,7 +379,7 @@ class PCCAgent:
         # every callback step. One step here is one epoch, one pass over the whole data set.
         first_timestep, epoch_timesteps = self.num_timesteps, len(obs)
         if self._goal_obs is None and hasattr(self.env.unwrapped, "goal_observation"):
-            self._goal_obs = self._check_obs(self.env.unwrapped.goal_observation(), single=True)
+            self.set_goal(self.env.unwrapped.goal_observation())
         if sb3_callback is not None:
             sb3_callback.init_callback(self)  # type: ignore[arg-type]
             sb3_callback.on_training_start(locals(), globals())
@@ -406,8 +444,26 @@ class PCCAgent:
 
     # ------------------------------------------------------------------ control
     def set_goal(self, goal_obs: np.ndarray) -> None:
-        """Set the goal observation the planner steers to."""
-        self._goal_obs = self._check_obs(goal_obs, single=True)
+        """Set the goal the planner steers to, from an image.
+
+        The goal is one observation as the env returns it: ``uint8`` of the model's
+        observation shape ``(frames, H, W)`` (:attr:`obs_shape`), e.g. the goal state's
+        frame repeated ``frames`` times, or an observation recorded at the goal. It is encoded
+        once, at the next :meth:`predict`, and again only when the goal or the model's weights
+        change.
+
+        Raises:
+            ValueError: Not a uint8 image of shape :attr:`obs_shape` (the message says which).
+        """
+        goal = np.asarray(goal_obs)
+        if goal.dtype != np.uint8 or goal.shape != self.obs_shape:
+            raise ValueError(
+                f"set_goal(): the goal must be one observation, uint8 of shape {self.obs_shape} "
+                f"(frames, H, W) like the env's; got {goal.dtype} {goal.shape}. Pass an "
+                "observation recorded at the goal (not a batch, not normalized)."
+            )
+        self._goal_obs = goal.copy()
+        self._goal_version += 1
 
     @property
     def goal_observation(self) -> np.ndarray | None:
@@ -435,50 +491,6 @@ class PCCAgent:
             )
         return obs
 
-    def _check_state(self, state: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """The warm start and the open-loop steps left, from ``state``; ValueError if malformed.
-
-        With ``replan_every == 1`` the state is the plans array alone; with more it is the
-        pair ``(plans, steps_left)``, ``steps_left`` one integer per observation.
-        """
-        replan_every = self.preset.planner.replan_every
-        if replan_every == 1:
-            return self._check_plans(state, n), np.zeros(n, dtype=np.int64)
-        if not (isinstance(state, tuple) and len(state) == 2):
-            raise ValueError(
-                f"predict(): with replan_every={replan_every} the state is the pair (plans, "
-                "steps_left) that the previous predict() call returned, or None at the start; "
-                f"got {type(state).__name__}."
-            )
-        left = np.asarray(state[1])
-        if (left.shape != (n,) or not np.issubdtype(left.dtype, np.integer)
-                or left.min(initial=0) < 0 or left.max(initial=0) >= replan_every):
-            raise ValueError(
-                f"predict(): steps_left must be {n} integers in [0, {replan_every - 1}], got "
-                f"{left.dtype} {left.shape}: pass back the state predict() returned."
-            )
-        return self._check_plans(state[0], n), left.astype(np.int64)
-
-    def _check_plans(self, state: Any, n: int) -> np.ndarray:
-        """The warm start as float32 ``(n, plan_length, action_dim)``, or ValueError."""
-        warm = np.asarray(state)
-        expected = (n, self.preset.planner.plan_length, self.action_dim)
-        if not np.issubdtype(warm.dtype, np.floating):
-            raise ValueError(
-                f"predict(): state must be a float array (got dtype {warm.dtype}): pass back the "
-                "state the previous predict() call returned, or None at the start."
-            )
-        if warm.shape != expected:
-            raise ValueError(
-                f"predict(): state has shape {warm.shape}; expected {expected} (n_envs, "
-                "plan_length, action_dim) for this observation batch: pass back the state the "
-                "previous predict() call on the same envs returned, or None at the start."
-            )
-        if not np.all(np.isfinite(warm)):
-            raise ValueError("predict(): state has non-finite values (NaN or inf); pass None to "
-                             "plan from scratch.")
-        return warm.astype(np.float32, copy=False)
-
     @staticmethod
     def _check_episode_start(episode_start: Any, n: int) -> np.ndarray:
         """``episode_start`` as ``(n,)`` booleans, or ValueError."""
@@ -497,8 +509,40 @@ class PCCAgent:
             )
         return starts.reshape(-1).astype(bool)
 
-    def _cost(self, goal: torch.Tensor) -> QuadraticCost:
-        return QuadraticCost.from_config(self.preset.planner, goal, self.action_dim)
+    def _weights_key(self) -> tuple[tuple[int, int, int], ...]:
+        """A cheap version of the model's weights.
+
+        It changes with any in-place update (training, ``load_state_dict``) or replaced
+        tensor (``model.to``).
+        """
+        return tuple((id(t), t.data_ptr(), t._version)
+                     for t in itertools.chain(self.model.parameters(), self.model.buffers()))
+
+    @property
+    def mpc(self) -> LatentMPC:
+        """The latent MPC that :meth:`predict` runs (model dynamics, encoded goal, settings).
+
+        Built at first use and rebuilt only when the goal, the planner settings or the model's
+        weights change (so the goal is encoded once, not at every step).
+
+        Raises:
+            RuntimeError: No goal set yet.
+        """
+        if self._goal_obs is None:
+            raise RuntimeError("No goal set: call set_goal(goal_obs) first (learn() sets it only "
+                               "on an env with goal_observation()).")
+        key = (self._weights_key(), self._goal_version, self._preset.planner)
+        if self._mpc is None or key != self._mpc_key:
+            self.model.eval()
+            with torch.no_grad():
+                goal, _ = self.model.encode(torch.as_tensor(self._goal_obs[None],
+                                                            device=self.device))
+            config = self._preset.planner
+            cost = QuadraticCost.from_config(config, goal[0], self.action_dim)
+            self._mpc = LatentMPC(self.model.planner_dynamics(), cost, config,
+                                  generator=self._plan_generator)
+            self._mpc_key = key
+        return self._mpc
 
     @torch.no_grad()
     def predict(
@@ -531,52 +575,18 @@ class PCCAgent:
             RuntimeError: No goal set yet.
         """
         obs = self._check_obs(observation)
-        if self._goal_obs is None:
-            raise RuntimeError("No goal set: call set_goal(goal_obs) first (learn() sets it only "
-                               "on an env with goal_observation()).")
         single = obs.shape == self.obs_shape
         batch = obs[None] if single else obs
         n = batch.shape[0]
-        warm_np, steps_left = (None, np.zeros(n, dtype=np.int64)) if state is None else (
-            self._check_state(state, n))
         starts = None if episode_start is None else self._check_episode_start(episode_start, n)
+        mpc = self.mpc  # raises without a goal; encodes the goal when it or the weights changed
         self.model.eval()
-        both = torch.as_tensor(np.concatenate([batch, self._goal_obs[None]]), device=self.device)
-        z_all, _ = self.model.encode(both)
-        z0, goal = z_all[:n], z_all[n]
-        cost = self._cost(goal)
-        dynamics = self.model.planner_dynamics()
-        config = self.preset.planner
-        fresh = np.ones(n, dtype=bool)
-        warm = None
-        if warm_np is not None:
-            warm = torch.as_tensor(warm_np, device=self.device)
-            fresh = np.zeros(n, dtype=bool)
-        if starts is not None:
-            fresh |= starts
-        # Between replans (replan_every > 1) the carried plan is executed as it is.
-        open_loop = ~fresh & (steps_left > 0)
-        refine = ~fresh & ~open_loop
-        u_plan = torch.empty(n, config.plan_length, self.action_dim, device=self.device)
-        if fresh.any():
-            idx = torch.as_tensor(np.flatnonzero(fresh), device=self.device)
-            result = plan(dynamics, cost, z0[idx], config, self._plan_generator)
-            u_plan[idx] = result.u.to(u_plan.dtype)
-        if refine.any():
-            idx = torch.as_tensor(np.flatnonzero(refine), device=self.device)
-            result = plan(dynamics, cost, z0[idx], config, self._plan_generator, warm[idx])
-            u_plan[idx] = result.u.to(u_plan.dtype)
-        if open_loop.any():
-            idx = torch.as_tensor(np.flatnonzero(open_loop), device=self.device)
-            u_plan[idx] = warm[idx]
+        z0, _ = self.model.encode(torch.as_tensor(batch, device=self.device))
+        u, next_state = mpc.step(z0, state, starts, caller="predict()")
         low = torch.as_tensor(self.env.action_space.low, device=self.device)
         high = torch.as_tensor(self.env.action_space.high, device=self.device)
-        actions = torch.clamp(u_plan[:, 0], low, high).cpu().numpy().astype(np.float32)
-        next_plans = shift_plan(u_plan).cpu().numpy()
-        if config.replan_every == 1:
-            return (actions[0] if single else actions), next_plans
-        left = np.where(open_loop, steps_left - 1, config.replan_every - 1).astype(np.int64)
-        return (actions[0] if single else actions), (next_plans, left)
+        actions = torch.clamp(u, low, high).cpu().numpy().astype(np.float32)
+        return (actions[0] if single else actions), next_state
 
     # ------------------------------------------------------------------ persistence
     def config_dict(self) -> dict[str, Any]:
@@ -606,19 +616,11 @@ class PCCAgent:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Save weights, configuration, goal and versions to one file (atomic, safe to load)."""
-        import gymnasium
-        import stable_baselines3
-
         path = Path(path)
         if path.suffix == "":
             path = path.with_suffix(".pt")
         extra = {
-            "versions": {
-                "pcc_control": pcc_agent.__version__,
-                "torch": torch.__version__,
-                "gymnasium": gymnasium.__version__,
-                "stable_baselines3": stable_baselines3.__version__,
-            },
+            "versions": versions(),
             "num_timesteps": self.num_timesteps,
             "goal_obs": None if self._goal_obs is None else self._goal_obs.tolist(),
             "train_summary": self.train_summary(),
@@ -683,7 +685,7 @@ class PCCAgent:
         agent.model.to(agent.device)
         goal = checkpoint.extra.get("goal_obs")
         if goal is not None:
-            agent._goal_obs = np.asarray(goal, dtype=np.uint8)
+            agent.set_goal(np.asarray(goal, dtype=np.uint8))
         agent.num_timesteps = int(checkpoint.extra.get("num_timesteps", 0))
         return agent
 
