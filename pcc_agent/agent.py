@@ -32,21 +32,14 @@ from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_weights, save_checkpoint
+from pcc_agent.config import DataConfig, EnvPreset, ModelConfig, PlannerConfig, TrainConfig
 from pcc_agent.io import sb3_logger, versions
 from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.planning import PLANNER_REVISION
-from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.mpc import LatentMPC
-from pcc_agent.presets import (
-    DataConfig,
-    EnvPreset,
-    ModelConfig,
-    TrainConfig,
-    default_preset_for_spaces,
-    get_preset,
-)
+from pcc_agent.presets import default_preset_for_spaces, get_preset
 from pcc_agent.training import TrainResult, resolve_device, train_embedding
 
 __all__ = ["PCCAgent", "collect_random_rollouts", "sb3_logger"]

@@ -4,7 +4,7 @@ Nothing here knows about images or environments: the planner works on latent sta
 actions ``u`` in a box, a :class:`LatentDynamics` and a :class:`QuadraticCost`.
 """
 
-from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.config import PlannerConfig
 from pcc_agent.planning.cost import CostDerivatives, QuadraticCost
 from pcc_agent.planning.dynamics import (
     FunctionDynamics,

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.dynamics import LatentDynamics, as_dynamics
 from pcc_agent.planning.ilqr import ILQRResult, ilqr_solve, plan
