@@ -45,6 +45,45 @@ from pcc_agent.training import TrainResult, resolve_device, train_embedding
 __all__ = ["PCCAgent", "collect_random_rollouts", "sb3_logger"]
 
 
+def action_bounds(action_space: gym.spaces.Space) -> tuple[np.ndarray, np.ndarray]:
+    """The per-dimension bounds ``(low, high)`` of a flat, bounded ``Box`` action space.
+
+    The agent plans in these bounds: its model and planner work in actions scaled to
+    ``[-1, 1]`` (-1 is ``low``, 1 is ``high``, per dimension), and :meth:`PCCAgent.predict`
+    returns them scaled back.
+
+    Raises:
+        ValueError: Not a ``Box``, not flat ``(n,)``, or a bound that is not finite or a
+            dimension whose ``low`` is not below its ``high``; the message names the problem.
+    """
+    if not isinstance(action_space, gym.spaces.Box):
+        raise ValueError(
+            f"PCCAgent needs a continuous Box action space, got {action_space}: the planner "
+            "optimizes real-valued actions inside their bounds."
+        )
+    if len(action_space.shape) != 1:
+        raise ValueError(
+            f"PCCAgent needs a flat Box action space of shape (n,), got shape "
+            f"{action_space.shape}: wrap the env in an ActionWrapper that takes flat actions."
+        )
+    low = np.asarray(action_space.low, dtype=np.float64)
+    high = np.asarray(action_space.high, dtype=np.float64)
+    unbounded = np.flatnonzero(~(np.isfinite(low) & np.isfinite(high)))
+    if unbounded.size:
+        raise ValueError(
+            f"PCCAgent plans inside the env's action bounds, but the action space {action_space} "
+            f"is unbounded in dimension(s) {unbounded.tolist()}: give the env a Box with "
+            "finite low and high (the range the actuator accepts), e.g. with an ActionWrapper."
+        )
+    empty = np.flatnonzero(~(low < high))
+    if empty.size:
+        raise ValueError(
+            f"The action space {action_space} has low >= high in dimension(s) "
+            f"{empty.tolist()}: nothing to plan there."
+        )
+    return low, high
+
+
 def collect_random_rollouts(
     env: gym.Env, num_samples: int, seed: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -77,7 +116,10 @@ class PCCAgent:
 
     Args:
         env: A Gymnasium env or a registered id (``"pcc/Planar-v0"``). Observations must be
-            ``uint8`` images ``(frames, H, W)`` and actions a ``Box``.
+            ``uint8`` images ``(frames, H, W)`` and actions a flat ``Box`` with finite bounds:
+            the model and the planner work in actions scaled to ``[-1, 1]`` by that box (per
+            dimension), so the agent plans over the env's whole action range
+            (:meth:`scale_action`, :meth:`unscale_action`).
         method: ``"pcc"``, ``"e2c"``, ``"rce"``, ``"pcc-no-consistency"``,
             ``"pcc-no-curvature"`` or ``"pcc-amortized"``.
         preset: An :class:`~pcc_agent.presets.EnvPreset`, a variant name (``"paper"`` or
@@ -138,6 +180,11 @@ class PCCAgent:
         obs_shape = self.env.observation_space.shape
         self.obs_shape: tuple[int, ...] = tuple(int(s) for s in obs_shape)
         self.action_dim = int(self.env.action_space.shape[0])
+        self._action_low, self._action_high = action_bounds(self.env.action_space)
+        #: Whether the env's actions are scaled to [-1, 1] for the model and the planner
+        #: (False for a [-1, 1] box, where the scaling is the identity).
+        self._scale_actions = not (np.all(self._action_low == -1.0)
+                                   and np.all(self._action_high == 1.0))
         model_config = model_config_for_method(self._preset.model, method)
         self._preset = dataclasses.replace(self._preset, model=model_config)
         self.model = self._build_model(model_config)
@@ -169,6 +216,29 @@ class PCCAgent:
     def planner(self) -> PlannerConfig:
         """The planner settings ``predict`` uses (change them with :meth:`set_planner`)."""
         return self._preset.planner
+
+    def scale_action(self, action: np.ndarray) -> np.ndarray:
+        """Env actions -> the ``[-1, 1]`` actions of the model and the planner (SB3's name).
+
+        -1 and 1 are the env's ``Box`` low and high, per dimension (the identity for a
+        ``[-1, 1]`` box). :meth:`learn` trains on scaled actions; the planner's
+        ``action_low`` / ``action_high`` are in these units.
+        """
+        action = np.asarray(action, dtype=np.float32)
+        if not self._scale_actions:
+            return action
+        center = (self._action_high + self._action_low) / 2
+        half = (self._action_high - self._action_low) / 2
+        return ((action - center) / half).astype(np.float32)
+
+    def unscale_action(self, scaled: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`scale_action`: ``[-1, 1]`` actions -> env actions."""
+        scaled = np.asarray(scaled, dtype=np.float32)
+        if not self._scale_actions:
+            return scaled
+        center = (self._action_high + self._action_low) / 2
+        half = (self._action_high - self._action_low) / 2
+        return (center + half * scaled).astype(np.float32)
 
     def set_planner(self, config: PlannerConfig | None = None, **changes: Any) -> None:
         """Change the planner settings; the next :meth:`predict` plans with them.
@@ -257,8 +327,15 @@ class PCCAgent:
             raise ValueError(
                 f"PCCAgent needs uint8 image observations (frames, H, W), got {obs_space}."
             )
-        if not isinstance(env.action_space, gym.spaces.Box) or len(env.action_space.shape) != 1:
-            raise ValueError(f"PCCAgent needs a flat Box action space, got {env.action_space}.")
+        low, high = action_bounds(env.action_space)
+        if hasattr(self, "_action_low") and not (
+            np.array_equal(low, self._action_low) and np.array_equal(high, self._action_high)
+        ):
+            raise ValueError(
+                f"The env's action bounds are [{low.tolist()}, {high.tolist()}], the model was "
+                f"built for [{self._action_low.tolist()}, {self._action_high.tolist()}] (it "
+                "plans in actions scaled to them)."
+            )
         if hasattr(self, "obs_shape") and tuple(obs_space.shape) != self.obs_shape:
             raise ValueError(
                 f"The env's observations have shape {obs_space.shape}, the model was built "
@@ -341,7 +418,8 @@ class PCCAgent:
             progress_bar: Show a progress bar over epochs with the loss terms.
             reset_num_timesteps: Start ``num_timesteps`` from 0 (else continue counting).
             dataset: Train on these transitions instead of collecting: a
-                ``pcc_envs.data.TransitionDataset`` or a tuple ``(obs, action, next_obs)``.
+                ``pcc_envs.data.TransitionDataset`` or a tuple ``(obs, action, next_obs)``,
+                actions in the env's units (they are scaled to ``[-1, 1]`` by the env's box).
             tb_log_name: Unused, SB3 compatibility.
             checkpoint_path: Training checkpoint written atomically every ``checkpoint_every``
                 epochs (weights, optimizer and RNG state; see :class:`pcc_agent.training.Trainer`).
@@ -366,6 +444,8 @@ class PCCAgent:
                 raise ValueError(f"total_timesteps must be >= 2, got {n}.")
             obs, action, next_obs = self._collect(n)
         self._check_obs(obs[:1], single=False)
+        if self._scale_actions:  # the model learns in [-1, 1] units (the env's box scaled)
+            action = self.scale_action(action)
         if reset_num_timesteps:
             self.num_timesteps = 0
         # SB3's meaning: num_timesteps counts the transitions learned from and advances with
@@ -576,6 +656,8 @@ class PCCAgent:
         self.model.eval()
         z0, _ = self.model.encode(torch.as_tensor(batch, device=self.device))
         u, next_state = mpc.step(z0, state, starts, caller="predict()")
+        if self._scale_actions:
+            u = torch.as_tensor(self.unscale_action(u.cpu().numpy()), device=self.device)
         low = torch.as_tensor(self.env.action_space.low, device=self.device)
         high = torch.as_tensor(self.env.action_space.high, device=self.device)
         actions = torch.clamp(u, low, high).cpu().numpy().astype(np.float32)
@@ -599,6 +681,7 @@ class PCCAgent:
             "action_dim": self.action_dim,
             "action_low": self.env.action_space.low.tolist(),
             "action_high": self.env.action_space.high.tolist(),
+            "action_scaling": "box",  # actions scaled to [-1, 1] by the bounds above
         }
 
     def train_summary(self) -> dict[str, Any]:
@@ -674,6 +757,15 @@ class PCCAgent:
                 f"{cfg['action_dim']} actions; this env has {agent.obs_shape} and "
                 f"{agent.action_dim}. Load it with the env it was trained on."
             )
+        if agent._scale_actions and cfg.get("action_scaling") != "box":
+            # Saved before the agent scaled actions to the box: trained on raw actions.
+            warnings.warn(
+                f"{path} was saved by an older version that trained and planned in the env's "
+                "raw action units (planner bounds [-1, 1]); it is loaded that way. Retrain it "
+                "to plan over the env's whole action box.",
+                stacklevel=2,
+            )
+            agent._scale_actions = False
         load_weights(agent.model, checkpoint)
         agent.model.to(agent.device)
         goal = checkpoint.extra.get("goal_obs")

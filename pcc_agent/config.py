@@ -325,8 +325,10 @@ class PlannerConfig:
         mu_max: Upper bound of the regularization; a problem whose mu would exceed it stops
             with status ``no_improvement``.
         mu_factor: Multiplicative increase (on failure) and decrease (on success) of mu.
-        action_low: Lower bound of every action dimension (the envs' normalized range).
-        action_high: Upper bound of every action dimension.
+        action_low: Lower bound of every action dimension. ``PCCAgent`` plans in actions
+            scaled to ``[-1, 1]`` by the env's ``Box`` (-1 is the env's low, 1 its high), so
+            the default -1 is the env's own lower bound, whatever its units.
+        action_high: Upper bound of every action dimension (default 1: the env's high).
         tolerance: Convergence threshold on the relative cost decrease of an accepted step.
     """
 
