@@ -27,88 +27,30 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
 from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
+from pcc_agent.agent_inputs import (
+    ActionScaler,
+    action_bounds,
+    as_sb3_callback,
+    check_episode_start,
+    check_image_space,
+    check_observations,
+    collect_random_rollouts,
+    resolve_preset,
+)
 from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_weights, save_checkpoint
-from pcc_agent.config import DataConfig, EnvPreset, ModelConfig, PlannerConfig, TrainConfig
+from pcc_agent.config import EnvPreset, PlannerConfig
 from pcc_agent.io import sb3_logger, versions
 from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.planning import PLANNER_REVISION
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.mpc import LatentMPC
-from pcc_agent.presets import default_preset_for_spaces, get_preset
 from pcc_agent.training import TrainResult, resolve_device, train_embedding
 
-__all__ = ["PCCAgent", "collect_random_rollouts", "sb3_logger"]
-
-
-def action_bounds(action_space: gym.spaces.Space) -> tuple[np.ndarray, np.ndarray]:
-    """The per-dimension bounds ``(low, high)`` of a flat, bounded ``Box`` action space.
-
-    The agent plans in these bounds: its model and planner work in actions scaled to
-    ``[-1, 1]`` (-1 is ``low``, 1 is ``high``, per dimension), and :meth:`PCCAgent.predict`
-    returns them scaled back.
-
-    Raises:
-        ValueError: Not a ``Box``, not flat ``(n,)``, or a bound that is not finite or a
-            dimension whose ``low`` is not below its ``high``; the message names the problem.
-    """
-    if not isinstance(action_space, gym.spaces.Box):
-        raise ValueError(
-            f"PCCAgent needs a continuous Box action space, got {action_space}: the planner "
-            "optimizes real-valued actions inside their bounds."
-        )
-    if len(action_space.shape) != 1:
-        raise ValueError(
-            f"PCCAgent needs a flat Box action space of shape (n,), got shape "
-            f"{action_space.shape}: wrap the env in an ActionWrapper that takes flat actions."
-        )
-    low = np.asarray(action_space.low, dtype=np.float64)
-    high = np.asarray(action_space.high, dtype=np.float64)
-    unbounded = np.flatnonzero(~(np.isfinite(low) & np.isfinite(high)))
-    if unbounded.size:
-        raise ValueError(
-            f"PCCAgent plans inside the env's action bounds, but the action space {action_space} "
-            f"is unbounded in dimension(s) {unbounded.tolist()}: give the env a Box with "
-            "finite low and high (the range the actuator accepts), e.g. with an ActionWrapper."
-        )
-    empty = np.flatnonzero(~(low < high))
-    if empty.size:
-        raise ValueError(
-            f"The action space {action_space} has low >= high in dimension(s) "
-            f"{empty.tolist()}: nothing to plan there."
-        )
-    return low, high
-
-
-def collect_random_rollouts(
-    env: gym.Env, num_samples: int, seed: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Transitions ``(obs, action, next_obs)`` from uniformly random actions.
-
-    The fallback for environments that do not offer the paper's uniform state sampler.
-    """
-    rng = np.random.default_rng(seed)
-    env.action_space.seed(int(rng.integers(2**31)))
-    obs_list, act_list, next_list = [], [], []
-    obs, _ = env.reset(seed=int(rng.integers(2**31)))
-    while len(obs_list) < num_samples:
-        action = env.action_space.sample()
-        next_obs, _, terminated, truncated, _ = env.step(action)
-        obs_list.append(obs)
-        act_list.append(action)
-        next_list.append(next_obs)
-        obs = next_obs
-        if terminated or truncated:
-            obs, _ = env.reset()
-    return (
-        np.asarray(obs_list, dtype=np.uint8),
-        np.asarray(act_list, dtype=np.float32),
-        np.asarray(next_list, dtype=np.uint8),
-    )
+__all__ = ["PCCAgent", "action_bounds", "collect_random_rollouts", "sb3_logger"]
 
 
 class PCCAgent:
@@ -174,20 +116,19 @@ class PCCAgent:
         self.set_env(env)
         assert self.env is not None
         self.env_id = self.env.spec.id if self.env.spec is not None else "custom"
-        self._preset = self._with_env_noise(self._resolve_preset(preset))
+        self._preset = resolve_preset(preset, self.env, self.env_id)
         if planner is not None:
             self._preset = dataclasses.replace(self._preset, planner=planner)
         obs_shape = self.env.observation_space.shape
         self.obs_shape: tuple[int, ...] = tuple(int(s) for s in obs_shape)
         self.action_dim = int(self.env.action_space.shape[0])
-        self._action_low, self._action_high = action_bounds(self.env.action_space)
-        #: Whether the env's actions are scaled to [-1, 1] for the model and the planner
-        #: (False for a [-1, 1] box, where the scaling is the identity).
-        self._scale_actions = not (np.all(self._action_low == -1.0)
-                                   and np.all(self._action_high == 1.0))
+        self._actions = ActionScaler(*action_bounds(self.env.action_space))
         model_config = model_config_for_method(self._preset.model, method)
         self._preset = dataclasses.replace(self._preset, model=model_config)
-        self.model = self._build_model(model_config)
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(self.seed)
+            self.model = EmbeddingModel(self.obs_shape, self.action_dim, model_config)
+        self.model.to(self.device)
         self._goal_obs: np.ndarray | None = None
         self._goal_version = 0
         self._plan_generator = torch.Generator().manual_seed(self.seed)
@@ -207,10 +148,8 @@ class PCCAgent:
 
     @preset.setter
     def preset(self, value: EnvPreset) -> None:
-        raise AttributeError(
-            "PCCAgent.preset is read-only: change the planner settings with "
-            "agent.set_planner(config) or agent.set_planner(replan_every=..., ...)."
-        )
+        raise AttributeError("PCCAgent.preset is read-only: change the planner settings with "
+                             "agent.set_planner(config) or agent.set_planner(replan_every=...).")
 
     @property
     def planner(self) -> PlannerConfig:
@@ -224,21 +163,11 @@ class PCCAgent:
         ``[-1, 1]`` box). :meth:`learn` trains on scaled actions; the planner's
         ``action_low`` / ``action_high`` are in these units.
         """
-        action = np.asarray(action, dtype=np.float32)
-        if not self._scale_actions:
-            return action
-        center = (self._action_high + self._action_low) / 2
-        half = (self._action_high - self._action_low) / 2
-        return ((action - center) / half).astype(np.float32)
+        return self._actions.scale(action)
 
     def unscale_action(self, scaled: np.ndarray) -> np.ndarray:
         """The inverse of :meth:`scale_action`: ``[-1, 1]`` actions -> env actions."""
-        scaled = np.asarray(scaled, dtype=np.float32)
-        if not self._scale_actions:
-            return scaled
-        center = (self._action_high + self._action_low) / 2
-        half = (self._action_high - self._action_low) / 2
-        return (center + half * scaled).astype(np.float32)
+        return self._actions.unscale(scaled)
 
     def set_planner(self, config: PlannerConfig | None = None, **changes: Any) -> None:
         """Change the planner settings; the next :meth:`predict` plans with them.
@@ -271,42 +200,6 @@ class PCCAgent:
         self._mpc = None
 
     # ------------------------------------------------------------------ set-up helpers
-    def _with_env_noise(self, preset: EnvPreset) -> EnvPreset:
-        """The preset with its data noise set to the env's process noise.
-
-        :meth:`learn` samples the data from the env, so saved configs then say how they were
-        made.
-        """
-        assert self.env is not None
-        env_noise = float(getattr(self.env.unwrapped, "noise_std", 0.0))
-        if preset.data.noise_std not in (0.0, env_noise):
-            raise ValueError(
-                f"The preset's data noise_std is {preset.data.noise_std}, but the env's process "
-                f"noise is {env_noise}: the training data are sampled from the env, so set "
-                "the noise with env_kwargs={'noise_std': ...} instead."
-            )
-        return dataclasses.replace(preset, data=dataclasses.replace(preset.data,
-                                                                    noise_std=env_noise))
-
-    def _resolve_preset(self, preset: EnvPreset | str | None) -> EnvPreset:
-        if isinstance(preset, EnvPreset):
-            return preset
-        variant = preset or "paper"
-        try:
-            return get_preset(self.env_id, variant)
-        except ValueError:
-            if preset is not None and self.env_id.startswith("pcc/"):
-                raise
-            return default_preset_for_spaces(
-                self.env.observation_space, self.env.action_space, self.env_id, variant=variant
-            )
-
-    def _build_model(self, config: ModelConfig) -> EmbeddingModel:
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(self.seed)
-            model = EmbeddingModel(self.obs_shape, self.action_dim, config)
-        return model.to(self.device)
-
     def set_env(self, env: gym.Env | str) -> None:
         """Attach an environment (SB3 ``set_env``); it must have the model's spaces."""
         if isinstance(env, str):
@@ -318,28 +211,20 @@ class PCCAgent:
                 "PCCAgent takes a single gymnasium env (it wraps it in a DummyVecEnv itself); "
                 "pass env.envs[0] or the env id."
             )
-        obs_space = env.observation_space
-        if not (
-            isinstance(obs_space, gym.spaces.Box)
-            and obs_space.dtype == np.uint8
-            and len(obs_space.shape) == 3
-        ):
-            raise ValueError(
-                f"PCCAgent needs uint8 image observations (frames, H, W), got {obs_space}."
-            )
+        shape = check_image_space(env.observation_space)
         low, high = action_bounds(env.action_space)
-        if hasattr(self, "_action_low") and not (
-            np.array_equal(low, self._action_low) and np.array_equal(high, self._action_high)
+        if hasattr(self, "_actions") and not (
+            np.array_equal(low, self._actions.low) and np.array_equal(high, self._actions.high)
         ):
             raise ValueError(
                 f"The env's action bounds are [{low.tolist()}, {high.tolist()}], the model was "
-                f"built for [{self._action_low.tolist()}, {self._action_high.tolist()}] (it "
+                f"built for [{self._actions.low.tolist()}, {self._actions.high.tolist()}] (it "
                 "plans in actions scaled to them)."
             )
-        if hasattr(self, "obs_shape") and tuple(obs_space.shape) != self.obs_shape:
+        if hasattr(self, "obs_shape") and shape != self.obs_shape:
             raise ValueError(
-                f"The env's observations have shape {obs_space.shape}, the model was built "
-                f"for {self.obs_shape}."
+                f"The env's observations have shape {shape}, the model was built for "
+                f"{self.obs_shape}."
             )
         self.env = env
         self._vec_env = DummyVecEnv([lambda: env])
@@ -432,7 +317,7 @@ class PCCAgent:
         Returns:
             self.
         """
-        sb3_callback = self._convert_callback(callback)  # refuse a wrong one before any work
+        sb3_callback = as_sb3_callback(callback)  # refuse a wrong one before any work
         if dataset is not None:
             if isinstance(dataset, tuple):
                 obs, action, next_obs = dataset
@@ -443,9 +328,8 @@ class PCCAgent:
             if n < 2:
                 raise ValueError(f"total_timesteps must be >= 2, got {n}.")
             obs, action, next_obs = self._collect(n)
-        self._check_obs(obs[:1], single=False)
-        if self._scale_actions:  # the model learns in [-1, 1] units (the env's box scaled)
-            action = self.scale_action(action)
+        check_observations(obs[:1], self.obs_shape, single=False)
+        action = self._actions.scale(action) if not self._actions.identity else action
         if reset_num_timesteps:
             self.num_timesteps = 0
         # SB3's meaning: num_timesteps counts the transitions learned from and advances with
@@ -496,25 +380,6 @@ class PCCAgent:
             )
         return self
 
-    def _convert_callback(self, callback: Any) -> BaseCallback | None:
-        if callback is None:
-            return None
-        if isinstance(callback, list):
-            callback = CallbackList([self._as_callback(c) for c in callback])
-        return self._as_callback(callback)
-
-    @staticmethod
-    def _as_callback(callback: Any) -> BaseCallback:
-        """An SB3 callback, or a function ``(locals, globals) -> bool`` wrapped as one."""
-        if isinstance(callback, BaseCallback):
-            return callback
-        if callable(callback):
-            return ConvertCallback(callback)
-        raise TypeError(
-            f"callback must be an SB3 BaseCallback, a function (locals, globals) -> bool, or a "
-            f"list of these; got {type(callback).__name__}."
-        )
-
     # ------------------------------------------------------------------ control
     def set_goal(self, goal_obs: np.ndarray) -> None:
         """Set the goal the planner steers to, from an image.
@@ -542,45 +407,6 @@ class PCCAgent:
     def goal_observation(self) -> np.ndarray | None:
         """The goal observation (a copy), or None before ``learn``."""
         return None if self._goal_obs is None else self._goal_obs.copy()
-
-    def _check_obs(self, observation: Any, single: bool | None = None) -> np.ndarray:
-        obs = np.asarray(observation)
-        if obs.dtype != np.uint8:
-            raise ValueError(
-                f"Observations must be uint8 images in [0, 255] (got dtype {obs.dtype}); pass the "
-                "env's observations unchanged (no normalization or float conversion)."
-            )
-        ok_single = obs.shape == self.obs_shape
-        ok_batch = obs.ndim == len(self.obs_shape) + 1 and obs.shape[1:] == self.obs_shape
-        if (
-            (single is True and not ok_single)
-            or (single is False and not ok_batch)
-            or not (ok_single or ok_batch)
-        ):
-            raise ValueError(
-                f"Observation has shape {obs.shape}; expected {self.obs_shape} or a batch "
-                f"(n_envs, *{self.obs_shape}). Check the frame stacking and channel order "
-                "(channels first)."
-            )
-        return obs
-
-    @staticmethod
-    def _check_episode_start(episode_start: Any, n: int) -> np.ndarray:
-        """``episode_start`` as ``(n,)`` booleans, or ValueError."""
-        starts = np.asarray(episode_start)
-        if starts.dtype != bool and not (
-            np.issubdtype(starts.dtype, np.integer) and np.isin(starts, (0, 1)).all()
-        ):
-            raise ValueError(
-                f"predict(): episode_start must be booleans (or 0/1), got {starts.dtype} values "
-                f"{starts.reshape(-1)[:4].tolist()}."
-            )
-        if starts.size != n:
-            raise ValueError(
-                f"predict(): episode_start has {starts.size} entries; expected {n}, one per "
-                "observation of the batch."
-            )
-        return starts.reshape(-1).astype(bool)
 
     def _weights_key(self) -> tuple[tuple[int, int, int], ...]:
         """A cheap version of the model's weights.
@@ -647,17 +473,17 @@ class PCCAgent:
                 dtype (or a non-finite ``state``).
             RuntimeError: No goal set yet.
         """
-        obs = self._check_obs(observation)
+        obs = check_observations(observation, self.obs_shape)
         single = obs.shape == self.obs_shape
         batch = obs[None] if single else obs
         n = batch.shape[0]
-        starts = None if episode_start is None else self._check_episode_start(episode_start, n)
+        starts = None if episode_start is None else check_episode_start(episode_start, n)
         mpc = self.mpc  # raises without a goal; encodes the goal when it or the weights changed
         self.model.eval()
         z0, _ = self.model.encode(torch.as_tensor(batch, device=self.device))
         u, next_state = mpc.step(z0, state, starts, caller="predict()")
-        if self._scale_actions:
-            u = torch.as_tensor(self.unscale_action(u.cpu().numpy()), device=self.device)
+        if not self._actions.identity:
+            u = torch.as_tensor(self._actions.unscale(u.cpu().numpy()), device=self.device)
         low = torch.as_tensor(self.env.action_space.low, device=self.device)
         high = torch.as_tensor(self.env.action_space.high, device=self.device)
         actions = torch.clamp(u, low, high).cpu().numpy().astype(np.float32)
@@ -730,15 +556,7 @@ class PCCAgent:
         try:
             env = cfg["env_id"] if env is None else env
             method = cfg["method"]
-            preset = EnvPreset(
-                env_id=cfg["env_id"],
-                model=ModelConfig.from_dict(cfg["model"]),
-                train=TrainConfig.from_dict(cfg["train"]),
-                data=DataConfig(**cfg["data"]),
-                planner=PlannerConfig(
-                    **{k: tuple(v) if isinstance(v, list) else v for k, v in cfg["planner"].items()}
-                ),
-            )
+            preset = EnvPreset.from_dict(cfg)
         except (KeyError, TypeError, ValueError) as error:
             raise CheckpointError(f"{path} is not a PCCAgent checkpoint: {error}") from error
         agent = cls(
@@ -757,7 +575,7 @@ class PCCAgent:
                 f"{cfg['action_dim']} actions; this env has {agent.obs_shape} and "
                 f"{agent.action_dim}. Load it with the env it was trained on."
             )
-        if agent._scale_actions and cfg.get("action_scaling") != "box":
+        if not agent._actions.identity and cfg.get("action_scaling") != "box":
             # Saved before the agent scaled actions to the box: trained on raw actions.
             warnings.warn(
                 f"{path} was saved by an older version that trained and planned in the env's "
@@ -765,7 +583,7 @@ class PCCAgent:
                 "to plan over the env's whole action box.",
                 stacklevel=2,
             )
-            agent._scale_actions = False
+            agent._actions = ActionScaler(agent._actions.low, agent._actions.high, enabled=False)
         load_weights(agent.model, checkpoint)
         agent.model.to(agent.device)
         goal = checkpoint.extra.get("goal_obs")

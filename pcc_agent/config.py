@@ -400,6 +400,24 @@ class EnvPreset:
     data: DataConfig
     planner: PlannerConfig = field(default_factory=PlannerConfig)
 
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> EnvPreset:
+        """The preset of a saved agent's config (JSON lists become tuples).
+
+        Reads the keys ``env_id``, ``model``, ``train``, ``data`` and ``planner``.
+
+        Raises:
+            KeyError, TypeError, ValueError: A missing key, an unknown field or a bad value.
+        """
+        planner = {k: tuple(v) if isinstance(v, list) else v for k, v in data["planner"].items()}
+        return cls(
+            env_id=data["env_id"],
+            model=ModelConfig.from_dict(data["model"]),
+            train=TrainConfig.from_dict(data["train"]),
+            data=DataConfig(**data["data"]),
+            planner=PlannerConfig(**planner),
+        )
+
 
 @dataclass(frozen=True)
 class DomainPresets:
