@@ -18,9 +18,8 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
+import itertools
 import os
-import sys
 import warnings
 from pathlib import Path
 from typing import Any
@@ -28,71 +27,30 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
-from stable_baselines3.common.logger import HumanOutputFormat, Logger, configure
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
-import pcc_agent
+from pcc_agent.agent_inputs import (
+    ActionScaler,
+    action_bounds,
+    as_sb3_callback,
+    check_episode_start,
+    check_image_space,
+    check_observations,
+    collect_random_rollouts,
+    resolve_preset,
+)
 from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_weights, save_checkpoint
+from pcc_agent.config import EnvPreset, PlannerConfig
+from pcc_agent.io import sb3_logger, versions
 from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.planning import PLANNER_REVISION
-from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
-from pcc_agent.planning.ilqr import plan
-from pcc_agent.planning.mpc import shift_plan
-from pcc_agent.presets import (
-    DataConfig,
-    EnvPreset,
-    ModelConfig,
-    TrainConfig,
-    default_preset_for_spaces,
-    get_preset,
-)
+from pcc_agent.planning.mpc import LatentMPC
 from pcc_agent.training import TrainResult, resolve_device, train_embedding
 
-__all__ = ["PCCAgent", "collect_random_rollouts", "sb3_logger"]
-
-
-def sb3_logger(folder: str | None, formats: list[str]) -> Logger:
-    """An SB3 logger writing ``formats`` ("stdout", "csv", "tensorboard", ...) under ``folder``.
-
-    Without a folder only "stdout" (or nothing) is allowed, and no directory is made: SB3's own
-    ``configure(None, ...)`` creates an empty ``SB3-<date>`` directory in the temp dir on
-    every call, one per training run.
-    """
-    if folder is not None:
-        return configure(folder, formats)
-    if any(fmt != "stdout" for fmt in formats):
-        raise ValueError(f"logger formats {formats} write files and need a folder")
-    return Logger(folder=None, output_formats=[HumanOutputFormat(sys.stdout)] if formats else [])
-
-
-def collect_random_rollouts(
-    env: gym.Env, num_samples: int, seed: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Transitions ``(obs, action, next_obs)`` from uniformly random actions.
-
-    The fallback for environments that do not offer the paper's uniform state sampler.
-    """
-    rng = np.random.default_rng(seed)
-    env.action_space.seed(int(rng.integers(2**31)))
-    obs_list, act_list, next_list = [], [], []
-    obs, _ = env.reset(seed=int(rng.integers(2**31)))
-    while len(obs_list) < num_samples:
-        action = env.action_space.sample()
-        next_obs, _, terminated, truncated, _ = env.step(action)
-        obs_list.append(obs)
-        act_list.append(action)
-        next_list.append(next_obs)
-        obs = next_obs
-        if terminated or truncated:
-            obs, _ = env.reset()
-    return (
-        np.asarray(obs_list, dtype=np.uint8),
-        np.asarray(act_list, dtype=np.float32),
-        np.asarray(next_list, dtype=np.uint8),
-    )
+__all__ = ["PCCAgent", "action_bounds", "collect_random_rollouts", "sb3_logger"]
 
 
 class PCCAgent:
@@ -100,7 +58,10 @@ class PCCAgent:
 
     Args:
         env: A Gymnasium env or a registered id (``"pcc/Planar-v0"``). Observations must be
-            ``uint8`` images ``(frames, H, W)`` and actions a ``Box``.
+            ``uint8`` images ``(frames, H, W)`` and actions a flat ``Box`` with finite bounds:
+            the model and the planner work in actions scaled to ``[-1, 1]`` by that box (per
+            dimension), so the agent plans over the env's whole action range
+            (:meth:`scale_action`, :meth:`unscale_action`).
         method: ``"pcc"``, ``"e2c"``, ``"rce"``, ``"pcc-no-consistency"``,
             ``"pcc-no-curvature"`` or ``"pcc-amortized"``.
         preset: An :class:`~pcc_agent.presets.EnvPreset`, a variant name (``"paper"`` or
@@ -155,55 +116,90 @@ class PCCAgent:
         self.set_env(env)
         assert self.env is not None
         self.env_id = self.env.spec.id if self.env.spec is not None else "custom"
-        self.preset = self._with_env_noise(self._resolve_preset(preset))
+        self._preset = resolve_preset(preset, self.env, self.env_id)
         if planner is not None:
-            self.preset = dataclasses.replace(self.preset, planner=planner)
+            self._preset = dataclasses.replace(self._preset, planner=planner)
         obs_shape = self.env.observation_space.shape
         self.obs_shape: tuple[int, ...] = tuple(int(s) for s in obs_shape)
         self.action_dim = int(self.env.action_space.shape[0])
-        model_config = model_config_for_method(self.preset.model, method)
-        self.preset = dataclasses.replace(self.preset, model=model_config)
-        self.model = self._build_model(model_config)
-        self._goal_obs = None if goal_obs is None else self._check_obs(goal_obs, single=True)
-        self._plan_generator = torch.Generator().manual_seed(self.seed)
-
-    # ------------------------------------------------------------------ set-up helpers
-    def _with_env_noise(self, preset: EnvPreset) -> EnvPreset:
-        """The preset with its data noise set to the env's process noise.
-
-        :meth:`learn` samples the data from the env, so saved configs then say how they were
-        made.
-        """
-        assert self.env is not None
-        env_noise = float(getattr(self.env.unwrapped, "noise_std", 0.0))
-        if preset.data.noise_std not in (0.0, env_noise):
-            raise ValueError(
-                f"The preset's data noise_std is {preset.data.noise_std}, but the env's process "
-                f"noise is {env_noise}: the training data are sampled from the env, so set "
-                "the noise with env_kwargs={'noise_std': ...} instead."
-            )
-        return dataclasses.replace(preset, data=dataclasses.replace(preset.data,
-                                                                    noise_std=env_noise))
-
-    def _resolve_preset(self, preset: EnvPreset | str | None) -> EnvPreset:
-        if isinstance(preset, EnvPreset):
-            return preset
-        variant = preset or "paper"
-        try:
-            return get_preset(self.env_id, variant)
-        except ValueError:
-            if preset is not None and self.env_id.startswith("pcc/"):
-                raise
-            return default_preset_for_spaces(
-                self.env.observation_space, self.env.action_space, self.env_id, variant=variant
-            )
-
-    def _build_model(self, config: ModelConfig) -> EmbeddingModel:
+        self._actions = ActionScaler(*action_bounds(self.env.action_space))
+        model_config = model_config_for_method(self._preset.model, method)
+        self._preset = dataclasses.replace(self._preset, model=model_config)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(self.seed)
-            model = EmbeddingModel(self.obs_shape, self.action_dim, config)
-        return model.to(self.device)
+            self.model = EmbeddingModel(self.obs_shape, self.action_dim, model_config)
+        self.model.to(self.device)
+        self._goal_obs: np.ndarray | None = None
+        self._goal_version = 0
+        self._plan_generator = torch.Generator().manual_seed(self.seed)
+        self._mpc: LatentMPC | None = None
+        self._mpc_key: tuple[Any, ...] | None = None
+        if goal_obs is not None:
+            self.set_goal(goal_obs)
 
+    # ------------------------------------------------------------------ settings
+    @property
+    def preset(self) -> EnvPreset:
+        """The agent's settings: model, training, data and planner (read-only).
+
+        Change the planner settings with :meth:`set_planner`.
+        """
+        return self._preset
+
+    @preset.setter
+    def preset(self, value: EnvPreset) -> None:
+        raise AttributeError("PCCAgent.preset is read-only: change the planner settings with "
+                             "agent.set_planner(config) or agent.set_planner(replan_every=...).")
+
+    @property
+    def planner(self) -> PlannerConfig:
+        """The planner settings ``predict`` uses (change them with :meth:`set_planner`)."""
+        return self._preset.planner
+
+    def scale_action(self, action: np.ndarray) -> np.ndarray:
+        """Env actions -> the ``[-1, 1]`` actions of the model and the planner (SB3's name).
+
+        -1 and 1 are the env's ``Box`` low and high, per dimension (the identity for a
+        ``[-1, 1]`` box). :meth:`learn` trains on scaled actions; the planner's
+        ``action_low`` / ``action_high`` are in these units.
+        """
+        return self._actions.scale(action)
+
+    def unscale_action(self, scaled: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`scale_action`: ``[-1, 1]`` actions -> env actions."""
+        return self._actions.unscale(scaled)
+
+    def set_planner(self, config: PlannerConfig | None = None, **changes: Any) -> None:
+        """Change the planner settings; the next :meth:`predict` plans with them.
+
+        The planner's random draws (the initial candidate plans) restart from the agent's
+        seed, so the agent then plans exactly as a freshly loaded one with these settings.
+        ``set_planner()`` without arguments only restarts the draws.
+
+        Args:
+            config: The new settings; default: the current ones.
+            **changes: Fields of :class:`~pcc_agent.planning.PlannerConfig` to change
+                (``plan_length=20``, ``replan_every=5``, ...), applied on top of ``config``.
+
+        Raises:
+            TypeError: An unknown field name.
+            ValueError: Inconsistent settings (from ``PlannerConfig``'s validation).
+
+        Example:
+            >>> agent.set_planner(plan_length=20, replan_every=5)  # doctest: +SKIP
+        """
+        base = self._preset.planner if config is None else config
+        if not isinstance(base, PlannerConfig):
+            raise TypeError(f"config must be a PlannerConfig, got {type(base).__name__}.")
+        unknown = set(changes) - {f.name for f in dataclasses.fields(PlannerConfig)}
+        if unknown:
+            raise TypeError(f"Unknown planner settings {sorted(unknown)}; see PlannerConfig.")
+        planner = dataclasses.replace(base, **changes)
+        self._preset = dataclasses.replace(self._preset, planner=planner)
+        self._plan_generator.manual_seed(self.seed)
+        self._mpc = None
+
+    # ------------------------------------------------------------------ set-up helpers
     def set_env(self, env: gym.Env | str) -> None:
         """Attach an environment (SB3 ``set_env``); it must have the model's spaces."""
         if isinstance(env, str):
@@ -215,21 +211,20 @@ class PCCAgent:
                 "PCCAgent takes a single gymnasium env (it wraps it in a DummyVecEnv itself); "
                 "pass env.envs[0] or the env id."
             )
-        obs_space = env.observation_space
-        if not (
-            isinstance(obs_space, gym.spaces.Box)
-            and obs_space.dtype == np.uint8
-            and len(obs_space.shape) == 3
+        shape = check_image_space(env.observation_space)
+        low, high = action_bounds(env.action_space)
+        if hasattr(self, "_actions") and not (
+            np.array_equal(low, self._actions.low) and np.array_equal(high, self._actions.high)
         ):
             raise ValueError(
-                f"PCCAgent needs uint8 image observations (frames, H, W), got {obs_space}."
+                f"The env's action bounds are [{low.tolist()}, {high.tolist()}], the model was "
+                f"built for [{self._actions.low.tolist()}, {self._actions.high.tolist()}] (it "
+                "plans in actions scaled to them)."
             )
-        if not isinstance(env.action_space, gym.spaces.Box) or len(env.action_space.shape) != 1:
-            raise ValueError(f"PCCAgent needs a flat Box action space, got {env.action_space}.")
-        if hasattr(self, "obs_shape") and tuple(obs_space.shape) != self.obs_shape:
+        if hasattr(self, "obs_shape") and shape != self.obs_shape:
             raise ValueError(
-                f"The env's observations have shape {obs_space.shape}, the model was built "
-                f"for {self.obs_shape}."
+                f"The env's observations have shape {shape}, the model was built for "
+                f"{self.obs_shape}."
             )
         self.env = env
         self._vec_env = DummyVecEnv([lambda: env])
@@ -248,9 +243,7 @@ class PCCAgent:
         if self._logger is None:
             formats = ["stdout"] if self.verbose else []
             if self.tensorboard_log:
-                formats += ["csv"]
-                if importlib.util.find_spec("tensorboard") is not None:
-                    formats += ["tensorboard"]
+                formats += ["csv", "tensorboard?"]  # TensorBoard when it is installed
             self._logger = sb3_logger(self.tensorboard_log or None, formats)
         return self._logger
 
@@ -310,7 +303,8 @@ class PCCAgent:
             progress_bar: Show a progress bar over epochs with the loss terms.
             reset_num_timesteps: Start ``num_timesteps`` from 0 (else continue counting).
             dataset: Train on these transitions instead of collecting: a
-                ``pcc_envs.data.TransitionDataset`` or a tuple ``(obs, action, next_obs)``.
+                ``pcc_envs.data.TransitionDataset`` or a tuple ``(obs, action, next_obs)``,
+                actions in the env's units (they are scaled to ``[-1, 1]`` by the env's box).
             tb_log_name: Unused, SB3 compatibility.
             checkpoint_path: Training checkpoint written atomically every ``checkpoint_every``
                 epochs (weights, optimizer and RNG state; see :class:`pcc_agent.training.Trainer`).
@@ -323,7 +317,7 @@ class PCCAgent:
         Returns:
             self.
         """
-        sb3_callback = self._convert_callback(callback)  # refuse a wrong one before any work
+        sb3_callback = as_sb3_callback(callback)  # refuse a wrong one before any work
         if dataset is not None:
             if isinstance(dataset, tuple):
                 obs, action, next_obs = dataset
@@ -334,14 +328,15 @@ class PCCAgent:
             if n < 2:
                 raise ValueError(f"total_timesteps must be >= 2, got {n}.")
             obs, action, next_obs = self._collect(n)
-        self._check_obs(obs[:1], single=False)
+        check_observations(obs[:1], self.obs_shape, single=False)
+        action = self._actions.scale(action) if not self._actions.identity else action
         if reset_num_timesteps:
             self.num_timesteps = 0
         # SB3's meaning: num_timesteps counts the transitions learned from and advances with
         # every callback step. One step here is one epoch, one pass over the whole data set.
         first_timestep, epoch_timesteps = self.num_timesteps, len(obs)
         if self._goal_obs is None and hasattr(self.env.unwrapped, "goal_observation"):
-            self._goal_obs = self._check_obs(self.env.unwrapped.goal_observation(), single=True)
+            self.set_goal(self.env.unwrapped.goal_observation())
         if sb3_callback is not None:
             sb3_callback.init_callback(self)  # type: ignore[arg-type]
             sb3_callback.on_training_start(locals(), globals())
@@ -385,120 +380,68 @@ class PCCAgent:
             )
         return self
 
-    def _convert_callback(self, callback: Any) -> BaseCallback | None:
-        if callback is None:
-            return None
-        if isinstance(callback, list):
-            callback = CallbackList([self._as_callback(c) for c in callback])
-        return self._as_callback(callback)
-
-    @staticmethod
-    def _as_callback(callback: Any) -> BaseCallback:
-        """An SB3 callback, or a function ``(locals, globals) -> bool`` wrapped as one."""
-        if isinstance(callback, BaseCallback):
-            return callback
-        if callable(callback):
-            return ConvertCallback(callback)
-        raise TypeError(
-            f"callback must be an SB3 BaseCallback, a function (locals, globals) -> bool, or a "
-            f"list of these; got {type(callback).__name__}."
-        )
-
     # ------------------------------------------------------------------ control
     def set_goal(self, goal_obs: np.ndarray) -> None:
-        """Set the goal observation the planner steers to."""
-        self._goal_obs = self._check_obs(goal_obs, single=True)
+        """Set the goal the planner steers to, from an image.
+
+        The goal is one observation as the env returns it: ``uint8`` of the model's
+        observation shape ``(frames, H, W)`` (:attr:`obs_shape`), e.g. the goal state's
+        frame repeated ``frames`` times, or an observation recorded at the goal. It is encoded
+        once, at the next :meth:`predict`, and again only when the goal or the model's weights
+        change.
+
+        Raises:
+            ValueError: Not a uint8 image of shape :attr:`obs_shape` (the message says which).
+        """
+        goal = np.asarray(goal_obs)
+        if goal.dtype != np.uint8 or goal.shape != self.obs_shape:
+            raise ValueError(
+                f"set_goal(): the goal must be one observation, uint8 of shape {self.obs_shape} "
+                f"(frames, H, W) like the env's; got {goal.dtype} {goal.shape}. Pass an "
+                "observation recorded at the goal (not a batch, not normalized)."
+            )
+        self._goal_obs = goal.copy()
+        self._goal_version += 1
 
     @property
     def goal_observation(self) -> np.ndarray | None:
         """The goal observation (a copy), or None before ``learn``."""
         return None if self._goal_obs is None else self._goal_obs.copy()
 
-    def _check_obs(self, observation: Any, single: bool | None = None) -> np.ndarray:
-        obs = np.asarray(observation)
-        if obs.dtype != np.uint8:
-            raise ValueError(
-                f"Observations must be uint8 images in [0, 255] (got dtype {obs.dtype}); pass the "
-                "env's observations unchanged (no normalization or float conversion)."
-            )
-        ok_single = obs.shape == self.obs_shape
-        ok_batch = obs.ndim == len(self.obs_shape) + 1 and obs.shape[1:] == self.obs_shape
-        if (
-            (single is True and not ok_single)
-            or (single is False and not ok_batch)
-            or not (ok_single or ok_batch)
-        ):
-            raise ValueError(
-                f"Observation has shape {obs.shape}; expected {self.obs_shape} or a batch "
-                f"(n_envs, *{self.obs_shape}). Check the frame stacking and channel order "
-                "(channels first)."
-            )
-        return obs
+    def _weights_key(self) -> tuple[tuple[int, int, int], ...]:
+        """A cheap version of the model's weights.
 
-    def _check_state(self, state: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """The warm start and the open-loop steps left, from ``state``; ValueError if malformed.
-
-        With ``replan_every == 1`` the state is the plans array alone; with more it is the
-        pair ``(plans, steps_left)``, ``steps_left`` one integer per observation.
+        It changes with any in-place update (training, ``load_state_dict``) or replaced
+        tensor (``model.to``).
         """
-        replan_every = self.preset.planner.replan_every
-        if replan_every == 1:
-            return self._check_plans(state, n), np.zeros(n, dtype=np.int64)
-        if not (isinstance(state, tuple) and len(state) == 2):
-            raise ValueError(
-                f"predict(): with replan_every={replan_every} the state is the pair (plans, "
-                "steps_left) that the previous predict() call returned, or None at the start; "
-                f"got {type(state).__name__}."
-            )
-        left = np.asarray(state[1])
-        if (left.shape != (n,) or not np.issubdtype(left.dtype, np.integer)
-                or left.min(initial=0) < 0 or left.max(initial=0) >= replan_every):
-            raise ValueError(
-                f"predict(): steps_left must be {n} integers in [0, {replan_every - 1}], got "
-                f"{left.dtype} {left.shape}: pass back the state predict() returned."
-            )
-        return self._check_plans(state[0], n), left.astype(np.int64)
+        return tuple((id(t), t.data_ptr(), t._version)
+                     for t in itertools.chain(self.model.parameters(), self.model.buffers()))
 
-    def _check_plans(self, state: Any, n: int) -> np.ndarray:
-        """The warm start as float32 ``(n, plan_length, action_dim)``, or ValueError."""
-        warm = np.asarray(state)
-        expected = (n, self.preset.planner.plan_length, self.action_dim)
-        if not np.issubdtype(warm.dtype, np.floating):
-            raise ValueError(
-                f"predict(): state must be a float array (got dtype {warm.dtype}): pass back the "
-                "state the previous predict() call returned, or None at the start."
-            )
-        if warm.shape != expected:
-            raise ValueError(
-                f"predict(): state has shape {warm.shape}; expected {expected} (n_envs, "
-                "plan_length, action_dim) for this observation batch: pass back the state the "
-                "previous predict() call on the same envs returned, or None at the start."
-            )
-        if not np.all(np.isfinite(warm)):
-            raise ValueError("predict(): state has non-finite values (NaN or inf); pass None to "
-                             "plan from scratch.")
-        return warm.astype(np.float32, copy=False)
+    @property
+    def mpc(self) -> LatentMPC:
+        """The latent MPC that :meth:`predict` runs (model dynamics, encoded goal, settings).
 
-    @staticmethod
-    def _check_episode_start(episode_start: Any, n: int) -> np.ndarray:
-        """``episode_start`` as ``(n,)`` booleans, or ValueError."""
-        starts = np.asarray(episode_start)
-        if starts.dtype != bool and not (
-            np.issubdtype(starts.dtype, np.integer) and np.isin(starts, (0, 1)).all()
-        ):
-            raise ValueError(
-                f"predict(): episode_start must be booleans (or 0/1), got {starts.dtype} values "
-                f"{starts.reshape(-1)[:4].tolist()}."
-            )
-        if starts.size != n:
-            raise ValueError(
-                f"predict(): episode_start has {starts.size} entries; expected {n}, one per "
-                "observation of the batch."
-            )
-        return starts.reshape(-1).astype(bool)
+        Built at first use and rebuilt only when the goal, the planner settings or the model's
+        weights change (so the goal is encoded once, not at every step).
 
-    def _cost(self, goal: torch.Tensor) -> QuadraticCost:
-        return QuadraticCost.from_config(self.preset.planner, goal, self.action_dim)
+        Raises:
+            RuntimeError: No goal set yet.
+        """
+        if self._goal_obs is None:
+            raise RuntimeError("No goal set: call set_goal(goal_obs) first (learn() sets it only "
+                               "on an env with goal_observation()).")
+        key = (self._weights_key(), self._goal_version, self._preset.planner)
+        if self._mpc is None or key != self._mpc_key:
+            self.model.eval()
+            with torch.no_grad():
+                goal, _ = self.model.encode(torch.as_tensor(self._goal_obs[None],
+                                                            device=self.device))
+            config = self._preset.planner
+            cost = QuadraticCost.from_config(config, goal[0], self.action_dim)
+            self._mpc = LatentMPC(self.model.planner_dynamics(), cost, config,
+                                  generator=self._plan_generator)
+            self._mpc_key = key
+        return self._mpc
 
     @torch.no_grad()
     def predict(
@@ -530,53 +473,21 @@ class PCCAgent:
                 dtype (or a non-finite ``state``).
             RuntimeError: No goal set yet.
         """
-        obs = self._check_obs(observation)
-        if self._goal_obs is None:
-            raise RuntimeError("No goal set: call set_goal(goal_obs) first (learn() sets it only "
-                               "on an env with goal_observation()).")
+        obs = check_observations(observation, self.obs_shape)
         single = obs.shape == self.obs_shape
         batch = obs[None] if single else obs
         n = batch.shape[0]
-        warm_np, steps_left = (None, np.zeros(n, dtype=np.int64)) if state is None else (
-            self._check_state(state, n))
-        starts = None if episode_start is None else self._check_episode_start(episode_start, n)
+        starts = None if episode_start is None else check_episode_start(episode_start, n)
+        mpc = self.mpc  # raises without a goal; encodes the goal when it or the weights changed
         self.model.eval()
-        both = torch.as_tensor(np.concatenate([batch, self._goal_obs[None]]), device=self.device)
-        z_all, _ = self.model.encode(both)
-        z0, goal = z_all[:n], z_all[n]
-        cost = self._cost(goal)
-        dynamics = self.model.planner_dynamics()
-        config = self.preset.planner
-        fresh = np.ones(n, dtype=bool)
-        warm = None
-        if warm_np is not None:
-            warm = torch.as_tensor(warm_np, device=self.device)
-            fresh = np.zeros(n, dtype=bool)
-        if starts is not None:
-            fresh |= starts
-        # Between replans (replan_every > 1) the carried plan is executed as it is.
-        open_loop = ~fresh & (steps_left > 0)
-        refine = ~fresh & ~open_loop
-        u_plan = torch.empty(n, config.plan_length, self.action_dim, device=self.device)
-        if fresh.any():
-            idx = torch.as_tensor(np.flatnonzero(fresh), device=self.device)
-            result = plan(dynamics, cost, z0[idx], config, self._plan_generator)
-            u_plan[idx] = result.u.to(u_plan.dtype)
-        if refine.any():
-            idx = torch.as_tensor(np.flatnonzero(refine), device=self.device)
-            result = plan(dynamics, cost, z0[idx], config, self._plan_generator, warm[idx])
-            u_plan[idx] = result.u.to(u_plan.dtype)
-        if open_loop.any():
-            idx = torch.as_tensor(np.flatnonzero(open_loop), device=self.device)
-            u_plan[idx] = warm[idx]
+        z0, _ = self.model.encode(torch.as_tensor(batch, device=self.device))
+        u, next_state = mpc.step(z0, state, starts, caller="predict()")
+        if not self._actions.identity:
+            u = torch.as_tensor(self._actions.unscale(u.cpu().numpy()), device=self.device)
         low = torch.as_tensor(self.env.action_space.low, device=self.device)
         high = torch.as_tensor(self.env.action_space.high, device=self.device)
-        actions = torch.clamp(u_plan[:, 0], low, high).cpu().numpy().astype(np.float32)
-        next_plans = shift_plan(u_plan).cpu().numpy()
-        if config.replan_every == 1:
-            return (actions[0] if single else actions), next_plans
-        left = np.where(open_loop, steps_left - 1, config.replan_every - 1).astype(np.int64)
-        return (actions[0] if single else actions), (next_plans, left)
+        actions = torch.clamp(u, low, high).cpu().numpy().astype(np.float32)
+        return (actions[0] if single else actions), next_state
 
     # ------------------------------------------------------------------ persistence
     def config_dict(self) -> dict[str, Any]:
@@ -596,6 +507,7 @@ class PCCAgent:
             "action_dim": self.action_dim,
             "action_low": self.env.action_space.low.tolist(),
             "action_high": self.env.action_space.high.tolist(),
+            "action_scaling": "box",  # actions scaled to [-1, 1] by the bounds above
         }
 
     def train_summary(self) -> dict[str, Any]:
@@ -606,19 +518,11 @@ class PCCAgent:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Save weights, configuration, goal and versions to one file (atomic, safe to load)."""
-        import gymnasium
-        import stable_baselines3
-
         path = Path(path)
         if path.suffix == "":
             path = path.with_suffix(".pt")
         extra = {
-            "versions": {
-                "pcc_control": pcc_agent.__version__,
-                "torch": torch.__version__,
-                "gymnasium": gymnasium.__version__,
-                "stable_baselines3": stable_baselines3.__version__,
-            },
+            "versions": versions(),
             "num_timesteps": self.num_timesteps,
             "goal_obs": None if self._goal_obs is None else self._goal_obs.tolist(),
             "train_summary": self.train_summary(),
@@ -652,15 +556,7 @@ class PCCAgent:
         try:
             env = cfg["env_id"] if env is None else env
             method = cfg["method"]
-            preset = EnvPreset(
-                env_id=cfg["env_id"],
-                model=ModelConfig.from_dict(cfg["model"]),
-                train=TrainConfig.from_dict(cfg["train"]),
-                data=DataConfig(**cfg["data"]),
-                planner=PlannerConfig(
-                    **{k: tuple(v) if isinstance(v, list) else v for k, v in cfg["planner"].items()}
-                ),
-            )
+            preset = EnvPreset.from_dict(cfg)
         except (KeyError, TypeError, ValueError) as error:
             raise CheckpointError(f"{path} is not a PCCAgent checkpoint: {error}") from error
         agent = cls(
@@ -679,11 +575,20 @@ class PCCAgent:
                 f"{cfg['action_dim']} actions; this env has {agent.obs_shape} and "
                 f"{agent.action_dim}. Load it with the env it was trained on."
             )
+        if not agent._actions.identity and cfg.get("action_scaling") != "box":
+            # Saved before the agent scaled actions to the box: trained on raw actions.
+            warnings.warn(
+                f"{path} was saved by an older version that trained and planned in the env's "
+                "raw action units (planner bounds [-1, 1]); it is loaded that way. Retrain it "
+                "to plan over the env's whole action box.",
+                stacklevel=2,
+            )
+            agent._actions = ActionScaler(agent._actions.low, agent._actions.high, enabled=False)
         load_weights(agent.model, checkpoint)
         agent.model.to(agent.device)
         goal = checkpoint.extra.get("goal_obs")
         if goal is not None:
-            agent._goal_obs = np.asarray(goal, dtype=np.uint8)
+            agent.set_goal(np.asarray(goal, dtype=np.uint8))
         agent.num_timesteps = int(checkpoint.extra.get("num_timesteps", 0))
         return agent
 

@@ -27,9 +27,9 @@ from typing import Any
 
 import torch
 
+from pcc_agent.config import ModelConfig
 from pcc_agent.io import atomic_torch_save, atomic_write_text
 from pcc_agent.model import EmbeddingModel
-from pcc_agent.presets import ModelConfig
 
 #: The atomic writers live in :mod:`pcc_agent.io`; re-exported here for older imports.
 __all__ = [

@@ -25,6 +25,7 @@ from typing import Any, NamedTuple, Protocol
 import torch
 
 from pcc_agent._forward_ad import jvp
+from pcc_agent.config import ModelConfig, TrainConfig
 from pcc_agent.distributions import (
     gaussian_entropy,
     gaussian_kl,
@@ -34,7 +35,6 @@ from pcc_agent.distributions import (
 )
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.networks import E2CTransition, to_float_image
-from pcc_agent.presets import ModelConfig, TrainConfig
 
 Metrics = dict[str, float]
 

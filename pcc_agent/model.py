@@ -15,8 +15,8 @@ from torch import nn
 from torch.func import jacrev, vmap
 
 from pcc_agent._forward_ad import jvp
+from pcc_agent.config import ModelConfig
 from pcc_agent.networks import TransitionOutput, build_networks, to_float_image
-from pcc_agent.presets import ModelConfig
 
 
 class EmbeddingModel(nn.Module):

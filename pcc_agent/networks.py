@@ -27,8 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from pcc_agent.config import ConvSpec, ModelConfig
 from pcc_agent.distributions import bernoulli_log_likelihood
-from pcc_agent.presets import ConvSpec, ModelConfig
 
 
 def to_float_image(obs: torch.Tensor) -> torch.Tensor:

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.mpc import LatentMPC
 

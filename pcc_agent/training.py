@@ -32,10 +32,10 @@ from pcc_agent.checkpoint import (
     load_weights,
     save_checkpoint,
 )
+from pcc_agent.config import TrainConfig
 from pcc_agent.io import atomic_write_text, sb3_logger
 from pcc_agent.losses import METHODS, TransitionBatch, get_loss
 from pcc_agent.model import EmbeddingModel
-from pcc_agent.presets import TrainConfig
 
 
 @dataclass(frozen=True)

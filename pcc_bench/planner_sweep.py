@@ -130,7 +130,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         agent = PCCAgent.load(args.checkpoint)
         env_id, method, env_kwargs = agent.env_id, agent.method, agent.env_kwargs
-        base_planner = agent.preset.planner
+        base_planner = agent.planner
         weight_grid = [None]
     try:
         configs = settings_grid(base_planner, args)
@@ -145,8 +145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 lambda env, o=oracle, p=planner: OracleController(env, o, p),
                 env_id, seeds, env_kwargs, record_states=False)
         else:
-            agent.preset = dataclasses.replace(agent.preset, planner=planner)
-            agent._plan_generator.manual_seed(agent.seed)
+            agent.set_planner(planner)  # also restarts the planner's draws from the seed
             result = evaluate_control(agent, env_id, seeds, env_kwargs, record_states=False)
         row = {
             "env": env_id, "method": method,

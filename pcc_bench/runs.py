@@ -149,7 +149,7 @@ def _reevaluate(
 
     agent = PCCAgent.load(checkpoint_path(results_dir, spec))
     planner = preset_for(spec).planner
-    agent.preset = replace(agent.preset, planner=planner)
+    agent.set_planner(planner)
     start = time.perf_counter()
     evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
     record = dict(record)

@@ -8,6 +8,7 @@ import tempfile
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 
@@ -85,7 +86,7 @@ def test_save_load_same_actions(trained, tmp_path):
     a2, _ = loaded.predict(obs)
     np.testing.assert_array_equal(a1, a2)
     # The reloaded agent plans exactly like the original one with a fresh planner RNG.
-    agent._plan_generator.manual_seed(agent.seed)
+    agent.set_planner()
     a0, _ = agent.predict(obs)
     np.testing.assert_allclose(a0, a1, atol=1e-6)
 
@@ -106,7 +107,7 @@ def test_two_seeded_runs_give_same_actions(trained):
     agent, cache = trained
     other = PCCAgent(ENV_ID, method="pcc", preset=tiny_preset(), seed=3, data_cache_dir=cache)
     other.learn(total_timesteps=300)
-    agent._plan_generator.manual_seed(agent.seed)
+    agent.set_planner()
     obs, _ = gym.make(ENV_ID).reset(seed=9)
     np.testing.assert_array_equal(agent.predict(obs)[0], other.predict(obs)[0])
 
@@ -265,9 +266,8 @@ def test_own_env_gets_the_asked_variant():
 
 def test_replan_every_executes_the_carried_plan_between_replans(trained):
     agent, _ = trained
-    original = agent.preset
-    agent.preset = dataclasses.replace(
-        original, planner=dataclasses.replace(original.planner, replan_every=3))
+    original = agent.planner
+    agent.set_planner(replan_every=3)
     try:
         obs, _ = gym.make(ENV_ID).reset(seed=0)
         action, (plans, left) = agent.predict(obs)
@@ -286,4 +286,55 @@ def test_replan_every_executes_the_carried_plan_between_replans(trained):
         with pytest.raises(ValueError, match="pair"):
             agent.predict(obs, state=plans)
     finally:
-        agent.preset = original
+        agent.set_planner(original)
+
+
+def test_planner_settings_change_through_set_planner_only(trained):
+    agent, _ = trained
+    original = agent.planner
+    with pytest.raises(AttributeError, match="set_planner"):
+        agent.preset = agent.preset
+    with pytest.raises(TypeError, match="Unknown planner settings"):
+        agent.set_planner(horizon=3)
+    with pytest.raises(ValueError, match="replan_every"):
+        agent.set_planner(replan_every=99)
+    assert agent.planner == original  # a refused change leaves the settings as they were
+    try:
+        agent.set_planner(plan_length=7)
+        assert agent.planner.plan_length == 7 and agent.preset.planner.plan_length == 7
+        assert agent.mpc.config.plan_length == 7
+        obs, _ = gym.make(ENV_ID).reset(seed=0)
+        assert agent.predict(obs)[1].shape == (1, 7, 2)
+    finally:
+        agent.set_planner(original)
+
+
+def test_goal_latent_is_cached_until_the_goal_or_the_weights_change(trained):
+    agent, cache = trained
+    goal = agent.goal_observation
+    mpc = agent.mpc
+    obs, _ = gym.make(ENV_ID).reset(seed=4)
+    agent.predict(obs)
+    assert agent.mpc is mpc  # the goal is not encoded again at every step
+    agent.set_goal(goal)
+    assert agent.mpc is not mpc
+    # Weights loaded into agent.model (as pcc_bench.time_to_control does) never leave a stale
+    # goal latent or stale dynamics: the agent plans as a fresh one with those weights.
+    fresh = PCCAgent(ENV_ID, method="pcc", preset=tiny_preset(), seed=3, data_cache_dir=cache)
+    fresh.set_goal(goal)
+    before = fresh.mpc.cost.goal.clone()
+    fresh.model.load_state_dict(agent.model.state_dict())
+    assert not torch.equal(fresh.mpc.cost.goal, before)
+    torch.testing.assert_close(fresh.mpc.cost.goal, agent.mpc.cost.goal)
+    agent.set_planner()
+    np.testing.assert_array_equal(fresh.predict(obs)[0], agent.predict(obs)[0])
+
+
+def test_set_goal_says_what_it_wants(trained):
+    agent, _ = trained
+    with pytest.raises(ValueError, match=r"uint8 of shape \(1, 40, 40\)"):
+        agent.set_goal(np.zeros((40, 40), np.uint8))
+    with pytest.raises(ValueError, match="not a batch"):
+        agent.set_goal(np.zeros((2, 1, 40, 40), np.uint8))
+    with pytest.raises(ValueError, match="float32"):
+        agent.set_goal(np.zeros((1, 40, 40), np.float32))

@@ -4,7 +4,7 @@ Nothing here knows about images or environments: the planner works on latent sta
 actions ``u`` in a box, a :class:`LatentDynamics` and a :class:`QuadraticCost`.
 """
 
-from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.config import PlannerConfig
 from pcc_agent.planning.cost import CostDerivatives, QuadraticCost
 from pcc_agent.planning.dynamics import (
     FunctionDynamics,
@@ -14,7 +14,7 @@ from pcc_agent.planning.dynamics import (
     as_dynamics,
 )
 from pcc_agent.planning.ilqr import ILQRResult, Status, ilqr_solve, plan
-from pcc_agent.planning.mpc import LatentMPC, shift_plan
+from pcc_agent.planning.mpc import LatentMPC, MPCStep, check_state, shift_plan
 
 #: Revision of the planner's numerics, written beside every benchmark evaluation. Bump it
 #: whenever a change can alter the actions planned for the same model and settings (closed-loop
@@ -33,12 +33,14 @@ __all__ = [
     "LatentDynamics",
     "LatentMPC",
     "MLPDynamics",
+    "MPCStep",
     "PLANNER_REVISION",
     "ModelDynamics",
     "PlannerConfig",
     "QuadraticCost",
     "Status",
     "as_dynamics",
+    "check_state",
     "ilqr_solve",
     "plan",
     "shift_plan",

@@ -18,7 +18,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.config import PlannerConfig
 
 
 class CostDerivatives(NamedTuple):

@@ -50,7 +50,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.config import PlannerConfig
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.dynamics import LatentDynamics
 from pcc_agent.planning.kernels import PackedMLP, closed_loop_rollout, riccati
