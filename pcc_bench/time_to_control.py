@@ -17,7 +17,7 @@ Every model's record is written to ``--results-dir`` as soon as it is evaluated,
 that is started again skips the models already done (resumable across sessions).
 
 Usage:
-    python -m pcc_bench.time_to_control --envs pcc/Planar-v0 --methods pcc e2c \\
+    python -m pcc_bench.time_to_control --envs pcc/Planar-v0 --methods pcc e2c \
         --seeds 0 1 2 --minutes 2 5 10 15 --workers 2
 """
 
@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from pcc_agent.io import atomic_save_figure, atomic_write_json
+from pcc_bench.arguments import command_parser
 from pcc_bench.executors import make_executor
 from pcc_bench.paths import DEFAULT_RESULTS_ROOT
 
@@ -189,10 +190,7 @@ def plot(rows: Sequence[dict[str, Any]], path: Path) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="example:\n  python -m pcc_bench.time_to_control "
-                                            "--envs pcc/Planar-v0 --seeds 0 1 2")
+    parser = command_parser(__doc__, "pcc_bench.time_to_control")
     parser.add_argument("--envs", nargs="+", default=["pcc/Planar-v0"])
     parser.add_argument("--methods", nargs="+", default=["pcc"])
     parser.add_argument("--variant", default="fast", help="preset variant (default: fast)")
