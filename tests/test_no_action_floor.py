@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from pcc_bench import no_action_floor
+from pcc_bench.presets import REPRODUCE_PRESETS
 
 
 def test_zero_action_policy_is_batched_and_refuses_spaces_without_zero():
@@ -26,10 +27,11 @@ def test_floor_of_planar_is_zero_and_written(tmp_path):
                                  "--output", str(out)]) == 0
     payload = json.loads((tmp_path / "floor_v1.0.json").read_text())
     (row,) = payload["rows"]
-    assert row["mean"] == 0.0 and row["num_tasks"] == 5 and len(row["percentages"]) == 5
+    tasks = REPRODUCE_PRESETS["quick"].num_tasks
+    assert row["mean"] == 0.0 and row["num_tasks"] == tasks and len(row["percentages"]) == tasks
     assert "--preset quick" in payload["command"]
     table = (tmp_path / "floor_v1.0.md").read_text()
-    assert "| pcc/Planar-v0 | 0 | 5 (2020) | 0.0 ± 0.0 |" in table
+    assert f"| pcc/Planar-v0 | 0 | {tasks} (2020) | 0.0 ± 0.0 |" in table
 
 
 def test_floor_counts_steps_a_falling_cartpole_spends_in_the_goal():
