@@ -7,8 +7,8 @@ and nothing we write can avoid it except not using forward-mode AD. So we trigge
 import ourselves with exactly this warning ignored, and nothing else is filtered: a deprecated
 call of our own still warns.
 
-``tests/test_failure_modes.py::test_torch_still_warns_about_its_own_jit_script_call`` fails
-once torch stops emitting the warning: then delete this module and use ``torch.func.jvp``.
+``test_torch_still_warns_about_its_own_jit_script_call`` (tests/integration/test_failure_modes.py)
+fails once torch stops emitting the warning: then delete this module and use ``torch.func.jvp``.
 """
 
 from __future__ import annotations

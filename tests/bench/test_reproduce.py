@@ -18,7 +18,7 @@ from pcc_bench.costs import estimate_cost
 from pcc_bench.records import RunSpec, load_finished_run
 from pcc_bench.runs import execute_run
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def tiny_spec(seed: int = 0) -> RunSpec:
@@ -377,7 +377,7 @@ def _start_sleepy_grid(markers: Path, seconds: float = 5.0) -> subprocess.Popen:
     import time
 
     code = (
-        "import sys; sys.path.insert(0, 'tests'); from test_reproduce import _sleepy_run, "
+        "import sys; sys.path.insert(0, 'tests/bench'); from test_reproduce import _sleepy_run, "
         "tiny_spec; from pcc_bench.grid import collect_outcomes; from pcc_bench.executors "
         "import interrupt, pool_outcomes; import signal; signal.signal(signal.SIGTERM, interrupt); "
         "specs = [tiny_spec(s) for s in range(8)]; "

@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("pygame", reason="classic-control rendering needs the examples extra")
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "pendulum_from_pixels.py"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "pendulum_from_pixels.py"
 
 
 @pytest.fixture(scope="module")

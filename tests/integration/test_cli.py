@@ -10,7 +10,7 @@ import pytest
 from pcc_bench import cli
 from pcc_bench.tables import terminal_table
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_version(capsys):

@@ -24,7 +24,7 @@ from pcc_agent.model import EmbeddingModel
 from pcc_agent.planning.config import PlannerConfig
 from pcc_agent.presets import ModelConfig, get_preset
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ENV_ID = "pcc/Planar-v0"
 SMALL = ModelConfig(latent_dim=2, encoder_hidden=(16,), decoder_hidden=(16,),
                     transition_hidden=(8,), backward_nz=4, backward_nu=4, backward_nx=8,
