@@ -116,6 +116,7 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
     for mark in kept:
         agent.model.load_state_dict(mark.pop("state"))
         agent.set_goal(goal)  # re-encode the goal with these weights
+        agent.set_planner()  # every mark plans with the same draws, as a freshly loaded agent
         evaluation = evaluate_control(agent, env_id, seeds, record_states=False)
         mark["percentages"] = [t.percent_in_goal for t in evaluation.tasks]
         mark["mean"] = float(np.mean(mark["percentages"]))
