@@ -37,6 +37,7 @@ from pcc_agent.planning import LatentMPC, MLPDynamics, PlannerConfig, QuadraticC
 from pcc_agent.presets import get_preset
 from pcc_bench.arguments import command_parser
 from pcc_bench.paths import COMMITTED_RESULTS_DIR
+from pcc_bench.records import cpu_name
 
 # domain: (env id, latent_dim, action_dim, transition hidden sizes) from the paper's
 # architectures.
@@ -150,23 +151,12 @@ def main(argv: list[str] | None = None) -> None:
         "torch": torch.__version__,
         "python": platform.python_version(),
         "machine": platform.machine(),
-        "processor": _cpu_name(),
+        "processor": cpu_name(),
         "warmup_ms": round(warmup_ms, 1),
         "rows": rows,
     }
     atomic_write_text(json.dumps(payload, indent=2) + "\n", args.output)
     print(f"wrote {args.output}")
-
-
-def _cpu_name() -> str:
-    """The CPU model from /proc/cpuinfo (Linux), else platform.processor()."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor()
 
 
 if __name__ == "__main__":

@@ -57,6 +57,17 @@ class RunSpec:
         return Path("runs") / self.preset / env / noise / self.method / f"seed{self.seed}.json"
 
 
+def cpu_name() -> str:
+    """The CPU model from /proc/cpuinfo (Linux), else platform.processor()."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor()
+
+
 def machine_info() -> dict[str, Any]:
     """The host, the SIMD kernels torch picked on it and the CPU's SIMD features.
 

@@ -27,7 +27,6 @@ import argparse
 import copy
 import json
 import math
-import platform
 import sys
 import time
 from collections.abc import Sequence
@@ -41,22 +40,12 @@ from pcc_agent.io import atomic_save_figure, atomic_write_json
 from pcc_bench.arguments import command_parser
 from pcc_bench.executors import make_executor
 from pcc_bench.paths import DEFAULT_RESULTS_ROOT
+from pcc_bench.records import cpu_name
 
 #: Task seed of the evaluation tasks (the paper's protocol; never used to choose a recipe).
 EVALUATION_TASK_SEED = 2020
 DEFAULT_MINUTES = (2.0, 5.0, 10.0, 15.0)
 DEFAULT_RESULTS_DIR = DEFAULT_RESULTS_ROOT / "time_to_control"
-
-
-def cpu_model() -> str:
-    """The CPU's model name (``/proc/cpuinfo``), or the platform's processor string."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def recipe_label(variant: str, lr: float | None) -> str:
@@ -136,7 +125,7 @@ def run_model(job: tuple[str, str, int], settings: dict[str, Any]) -> dict[str, 
                                 settings["max_epochs"], settings["patience"],
                                 settings["num_tasks"], settings["task_seed"],
                                 settings["flush_denormals"], settings["lr"])
-    record["cpu"] = cpu_model()
+    record["cpu"] = cpu_name()
     return record
 
 
@@ -257,7 +246,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                for path in sorted(args.results_dir.glob(f"*/*_tasks{args.task_seed}_seed*.json"))]
     rows = aggregate(records)
     out = args.out or args.results_dir / "time_to_control.json"
-    atomic_write_json(out, {"command": command, "cpu": cpu_model(),
+    atomic_write_json(out, {"command": command, "cpu": cpu_name(),
                             "task_seed": args.task_seed, "rows": rows})
     plot(rows, out.with_suffix(".png"))
     for row in rows:
