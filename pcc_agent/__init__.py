@@ -8,7 +8,7 @@ from typing import Any
 
 __version__ = "0.2.0"
 
-__all__ = ["PCCAgent", "__version__"]
+__all__ = ["PCCAgent", "__version__", "load_pretrained"]
 
 
 def __getattr__(name: str) -> Any:
@@ -16,4 +16,8 @@ def __getattr__(name: str) -> Any:
         from pcc_agent.agent import PCCAgent
 
         return PCCAgent
+    if name == "load_pretrained":
+        from pcc_agent.zoo import load_pretrained
+
+        return load_pretrained
     raise AttributeError(f"module 'pcc_agent' has no attribute {name!r}")

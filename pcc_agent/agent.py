@@ -516,8 +516,16 @@ class PCCAgent:
             return {}
         return self.train_result.summary()
 
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Save weights, configuration, goal and versions to one file (atomic, safe to load)."""
+    def save(self, path: str | os.PathLike[str], half: bool = False) -> None:
+        """Save weights, configuration, goal and versions to one file (atomic, safe to load).
+
+        Args:
+            path: The file; ``.pt`` is appended when it has no suffix. A ``.safetensors``
+                suffix writes the safetensors format (see :mod:`pcc_agent.checkpoint`).
+            half: Store the weights as float16 (``.safetensors`` only): half the size; the
+                loaded agent computes with the rounded weights, so evaluate the loaded agent
+                to know its score.
+        """
         path = Path(path)
         if path.suffix == "":
             path = path.with_suffix(".pt")
@@ -527,7 +535,7 @@ class PCCAgent:
             "goal_obs": None if self._goal_obs is None else self._goal_obs.tolist(),
             "train_summary": self.train_summary(),
         }
-        save_checkpoint(path, self.model, self.config_dict(), extra)
+        save_checkpoint(path, self.model, self.config_dict(), extra, half=half)
 
     @classmethod
     def load(
@@ -540,7 +548,8 @@ class PCCAgent:
         """Load an agent saved by :meth:`save`.
 
         Args:
-            path: The file (``.pt`` is appended when missing and the bare path does not exist).
+            path: The file, ``.pt`` or ``.safetensors`` (``.pt`` is appended when missing and
+                the bare path does not exist).
             env: The environment to control; default: ``gym.make`` of the saved env id.
             device: Device of the model.
             **kwargs: Ignored SB3 arguments (``custom_objects``, ...).

@@ -1,7 +1,16 @@
 """Atomic, safe checkpoints of an :class:`~pcc_agent.model.EmbeddingModel`.
 
-A checkpoint is one file written with ``torch.save`` and read with
-``torch.load(weights_only=True)`` (no pickled code is ever executed). It holds:
+A checkpoint is one file, in one of two formats:
+
+* ``*.pt`` (the default): written with ``torch.save`` and read with
+  ``torch.load(weights_only=True)``, so no pickled code is ever executed;
+* ``*.safetensors``: the `safetensors <https://huggingface.co/docs/safetensors>`_ format
+  (tensors and a JSON header, nothing executable by construction), optionally with the weights
+  stored in float16 to halve the file (the pretrained models shipped with the package and the
+  weights behind committed benchmark rows). Loading casts them back to float32; no training
+  state is stored.
+
+It holds:
 
 * ``state_dict``: the model weights;
 * ``architecture_json``: observation shape, action dimension and ``ModelConfig`` (enough to
@@ -28,7 +37,7 @@ from typing import Any
 import torch
 
 from pcc_agent.config import ModelConfig
-from pcc_agent.io import atomic_torch_save, atomic_write_text
+from pcc_agent.io import atomic_torch_save, atomic_write_bytes, atomic_write_text
 from pcc_agent.model import EmbeddingModel
 
 #: The atomic writers live in :mod:`pcc_agent.io`; re-exported here for older imports.
@@ -36,6 +45,9 @@ __all__ = [
     "Checkpoint", "CheckpointError", "atomic_torch_save", "atomic_write_text", "load_checkpoint",
     "load_model", "load_weights", "save_checkpoint", "torch_load_safely",
 ]
+
+#: File suffix of the safetensors format; every other suffix is written with ``torch.save``.
+SAFETENSORS_SUFFIX = ".safetensors"
 
 FORMAT_NAME = "pcc_agent.checkpoint"
 FORMAT_VERSION = 1
@@ -90,23 +102,42 @@ def save_checkpoint(
     config_dict: dict[str, Any] | None = None,
     extra: dict[str, Any] | None = None,
     state: dict[str, Any] | None = None,
+    half: bool = False,
 ) -> Path:
     """Save a model atomically to one file.
 
     Args:
-        path: Destination file (parent directories are created).
+        path: Destination file (parent directories are created). A ``.safetensors`` suffix
+            selects the safetensors format, any other ``torch.save``'s.
         model: The model.
         config_dict: JSON-serializable configuration (training config, method, env id, ...).
         extra: JSON-serializable metadata.
         state: Optional training state made only of tensors and plain Python containers /
-            numbers (e.g. ``optimizer.state_dict()``, ``generator.get_state()``).
+            numbers (e.g. ``optimizer.state_dict()``, ``generator.get_state()``). Not
+            stored in the safetensors format.
+        half: Store floating-point weights as float16 (safetensors format only): half the
+            size; the model loaded from it computes with the rounded weights.
 
     Returns:
         The path written.
 
     Raises:
         TypeError: ``config_dict`` or ``extra`` is not JSON-serializable.
+        ValueError: ``half`` or ``state`` asked of a ``torch.save`` / safetensors file that
+            cannot hold it.
     """
+    if Path(path).suffix == SAFETENSORS_SUFFIX:
+        if state:
+            raise ValueError(
+                f"{path}: the safetensors format stores weights only, not training state; "
+                "save training checkpoints as .pt files."
+            )
+        return _save_safetensors(Path(path), model, config_dict, extra, half)
+    if half:
+        raise ValueError(
+            f"{path}: float16 weights are stored in the safetensors format only; give the "
+            f"file the {SAFETENSORS_SUFFIX} suffix."
+        )
     payload = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -118,6 +149,72 @@ def save_checkpoint(
     }
     atomic_torch_save(payload, path)
     return Path(path)
+
+
+def _save_safetensors(
+    path: Path, model: EmbeddingModel, config_dict: dict[str, Any] | None,
+    extra: dict[str, Any] | None, half: bool,
+) -> Path:
+    """Write the weights and the JSON fields as a safetensors file, atomically."""
+    from safetensors.torch import save
+
+    tensors = {}
+    for name, value in model.state_dict().items():
+        value = value.detach().cpu()
+        if half and value.is_floating_point():
+            value = value.to(torch.float16)
+        tensors[name] = value.contiguous()
+    metadata = {
+        "format": FORMAT_NAME,
+        "version": str(FORMAT_VERSION),
+        "architecture_json": json.dumps(model.architecture()),
+        "config_json": json.dumps(config_dict or {}),
+        "extra_json": json.dumps(extra or {}),
+        "weights_dtype": "float16" if half else "float32",
+    }
+    atomic_write_bytes(path, save(tensors, metadata=metadata))
+    return path
+
+
+def _load_safetensors(path: Path, map_location: torch.device | str) -> Checkpoint:
+    """Read a safetensors checkpoint; float16 weights come back as float32."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load
+
+    data = path.read_bytes()
+    if not data:
+        raise CheckpointError(f"Checkpoint {path} is empty (0 bytes): it was never written. "
+                              f"{_REMEDY}")
+    try:
+        tensors = load(data)
+        header_length = int.from_bytes(data[:8], "little")
+        metadata = json.loads(data[8:8 + header_length]).get("__metadata__") or {}
+    except (SafetensorError, ValueError, UnicodeDecodeError) as error:
+        raise CheckpointError(
+            f"Checkpoint {path} is not a readable safetensors file ({_reason(error)}): it is "
+            f"truncated or corrupt. {_REMEDY}"
+        ) from error
+    if metadata.get("format") != FORMAT_NAME or metadata.get("version") != str(FORMAT_VERSION):
+        raise CheckpointError(
+            f"{path} is not a pcc_agent checkpoint of format version {FORMAT_VERSION} (its "
+            f"metadata: format={metadata.get('format')!r}, version={metadata.get('version')!r})."
+        )
+    state_dict = {
+        name: (value.to(torch.float32) if value.dtype == torch.float16 else value)
+        .to(map_location)
+        for name, value in tensors.items()
+    }
+    try:
+        return Checkpoint(
+            path=path,
+            state_dict=state_dict,
+            architecture=json.loads(metadata["architecture_json"]),
+            config=json.loads(metadata["config_json"]),
+            extra=json.loads(metadata["extra_json"]),
+        )
+    except (KeyError, json.JSONDecodeError) as error:
+        raise CheckpointError(f"Checkpoint {path} is missing or has damaged fields: {error}.") \
+            from error
 
 
 _REMEDY = "Re-train or restore it from a backup."
@@ -224,7 +321,7 @@ def load_checkpoint(
     """Read a checkpoint written by :func:`save_checkpoint`.
 
     Args:
-        path: The file.
+        path: The file (``.safetensors``: that format; else ``torch.save``'s).
         map_location: Device the tensors are loaded to.
 
     Returns:
@@ -235,6 +332,10 @@ def load_checkpoint(
             objects (refused, nothing of it is executed); or not a pcc_agent checkpoint.
     """
     path = Path(path)
+    if path.suffix == SAFETENSORS_SUFFIX:
+        if not path.is_file():
+            raise CheckpointError(f"Checkpoint {path} does not exist (or is not a file).")
+        return _load_safetensors(path, map_location)
     payload = torch_load_safely(path, map_location)
     if not isinstance(payload, dict) or payload.get("format") != FORMAT_NAME:
         raise CheckpointError(

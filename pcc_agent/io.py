@@ -23,6 +23,7 @@ __all__ = [
     "atomic_save_figure",
     "atomic_torch_save",
     "atomic_write",
+    "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
     "sb3_logger",
@@ -63,6 +64,11 @@ def atomic_write(
 def atomic_write_text(text: str, path: str | os.PathLike[str]) -> Path:
     """Write a text file atomically (UTF-8)."""
     return atomic_write(path, lambda handle: handle.write(text))
+
+
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write bytes to a file atomically."""
+    return atomic_write(path, lambda handle: handle.write(data), binary=True)
 
 
 def atomic_write_json(path: str | os.PathLike[str], payload: Any, indent: int = 1) -> Path:

@@ -17,7 +17,7 @@ from pcc_bench.arguments import invoked_as
 COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("pcc_bench.train", "train one agent (PCC, E2C, RCE, ...) on an env and save it"),
     "evaluate": ("pcc_bench.evaluate",
-                 "% of steps in goal of a saved agent on its env's 10 evaluation tasks"),
+                 "% of steps in goal of a saved or pretrained agent on 10 evaluation tasks"),
     "reproduce": ("pcc_bench.reproduce",
                   "reproduce the paper's tables: N models x M tasks, resumable"),
     "vs-sac": ("pcc_bench.vs_sac", "SAC (Stable-Baselines3) on the same images, tasks, metric"),
@@ -28,6 +28,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "planner-sweep": ("pcc_bench.planner_sweep",
                       "control quality over a grid of planner settings"),
     "latent-maps": ("pcc_bench.latent_maps", "latent maps (paper Figure 2) of saved agents"),
+    "export-weights": ("pcc_bench.weights",
+                       "float16 weights for a grid's older records, re-evaluated with them"),
 }
 #: ``pcc speed <what>``: (module run, one-line description).
 SPEED_COMMANDS: dict[str, tuple[str, str]] = {
@@ -39,6 +41,7 @@ SPEED_COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 EXAMPLES = """examples:
+  pcc evaluate planar-pcc                       # a shipped pretrained agent, in seconds
   pcc train --env pcc/Planar-v0                 # a PCC agent, saved under pcc_results/models
   pcc evaluate pcc_results/models/Planar-v0_pcc_seed0.pt
   pcc reproduce --preset quick                  # Planar, PCC, a few minutes on 2 CPU cores

@@ -7,7 +7,11 @@ each task: the oracle (the planner on the true dynamics: the ceiling of the env'
 settings) and the no-action floor (zero actions), read from the reproduction records in
 ``--references-dir`` where they exist for the same tasks and the current planner.
 
+``MODEL`` is a saved agent's file or the name of a pretrained agent shipped with the package
+(``pcc_agent.zoo``), which then runs in seconds and prints the score it was shipped with.
+
 Examples:
+    pcc evaluate planar-pcc --picture planar.png
     python -m pcc_bench.evaluate pcc_results/models/Planar-v0_pcc_seed0.pt
     python -m pcc_bench.evaluate planar_e2c.pt --num-tasks 3 --json planar_e2c_eval.json
 """
@@ -16,10 +20,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pcc_agent.zoo import PRETRAINED, pretrained_path
 from pcc_bench.arguments import command_parser, non_negative_float, positive_int
 from pcc_bench.paths import COMMITTED_RESULTS_DIR
 from pcc_bench.presets import REPRODUCE_PRESETS
@@ -52,7 +58,9 @@ def reference_percentages(
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
     parser = command_parser(__doc__, "pcc_bench.evaluate")
-    parser.add_argument("model", type=Path, help="An agent saved by PCCAgent.save / pcc train.")
+    parser.add_argument("model", type=Path,
+                        help="An agent saved by PCCAgent.save / pcc train, or a pretrained "
+                        f"agent's name ({', '.join(sorted(PRETRAINED))}).")
     parser.add_argument("--env", default=None, metavar="ENV_ID",
                         help="The env to control (default: the one the agent was trained on).")
     parser.add_argument("--num-tasks", type=positive_int, default=_PAPER.num_tasks,
@@ -65,6 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--references-dir", type=Path, default=DEFAULT_REFERENCES_DIR,
                         help="Reproduction results with the oracle and no-action records "
                         "(default: the repository's committed results).")
+    parser.add_argument("--picture", type=Path, default=None, metavar="PNG",
+                        help="Also draw the first task's controlled episode to this PNG.")
     parser.add_argument("--json", type=Path, default=None,
                         help="Also write the per-task results to this JSON file.")
     return parser
@@ -73,8 +83,13 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m pcc_bench.evaluate`` and ``pcc evaluate``."""
     args = build_parser().parse_args(argv)
+    shipped = None
     if not args.model.exists() and not args.model.with_suffix(".pt").exists():
-        raise SystemExit(f"No saved agent at {args.model}.")
+        if str(args.model) not in PRETRAINED:
+            raise SystemExit(f"No saved agent at {args.model}, and no pretrained agent of that "
+                             f"name (shipped: {', '.join(sorted(PRETRAINED))}).")
+        shipped = PRETRAINED[str(args.model)]
+        args.model = pretrained_path(shipped.name)
     import numpy as np
 
     from pcc_agent.agent import PCCAgent
@@ -106,9 +121,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                  *("-" if means[m] is None else f"{means[m]:.1f}" for m in (ORACLE, NO_ACTION))])
     print(f"{agent.method} on {env_id}: % of steps in goal per task\n(model: {args.model})")
     print(terminal_table(["task", "seed", agent.method, "oracle", "no action"], rows))
+    if shipped is not None and args.env is None and not args.noise and seeds == task_seeds(
+            shipped.task_seed, len(shipped.percentages)):
+        print(textwrap.fill(f"Shipped with {shipped.mean:.1f} % on these tasks, measured on a "
+                            f"{shipped.machine}. It is the model of {shipped.source}.", 100))
     if all(v is None for v in references.values()):
         print("No oracle or no-action records of these tasks (the references are kept for the "
               f"{_PAPER.num_tasks}\nevaluation tasks) in --references-dir {args.references_dir}")
+    if args.picture is not None:
+        from pcc_bench.episode_figure import plot_controlled_episode
+
+        plot_controlled_episode(agent, env_id, seeds[0], args.picture, env_kwargs=env_kwargs)
+        print(f"Wrote {args.picture} (task 1, frame by frame, green while in goal)")
     if args.json is not None:
         atomic_write_json(args.json, {
             "model": str(args.model), "env_id": env_id, "method": agent.method,

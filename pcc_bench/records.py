@@ -95,6 +95,15 @@ def checkpoint_path(results_dir: str | Path, spec: RunSpec) -> Path:
     return Path(results_dir) / "checkpoints" / spec.relative_path.with_suffix(".pt")
 
 
+def weights_path(results_dir: str | Path, spec: RunSpec) -> Path:
+    """Where a run's float16 weights are kept: the agent its record was evaluated with.
+
+    Small enough to commit beside the record (``results/<dir>/weights/...``), so that an
+    evaluation change re-runs without retraining and reproduces the record exactly.
+    """
+    return Path(results_dir) / "weights" / spec.relative_path.with_suffix(".safetensors")
+
+
 def training_checkpoint_path(results_dir: str | Path, spec: RunSpec) -> Path:
     """Where a run's training in progress is checkpointed (removed once the run is done)."""
     return checkpoint_path(results_dir, spec).with_suffix(".training.pt")

@@ -30,6 +30,7 @@ from pcc_bench.records import (
     same_spec,
     training_checkpoint_path,
 )
+from pcc_bench.weights import save_half_weights, saved_agent_path
 
 #: Epochs between a run's training checkpoints: a run cut short (Ctrl-C, a crash, the end of
 #: a working session) resumes from its last one; at most this many epochs are redone.
@@ -61,7 +62,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         and spec.method not in REFERENCE_METHODS
         and same_spec(trained.get("spec"), spec)
         and same_recipe(trained, spec)
-        and checkpoint_path(results_dir, spec).exists()
+        and saved_agent_path(trained, Path(results_dir), spec) is not None
     ):
         return _reevaluate(trained, spec, Path(results_dir), seeds, env_kwargs)
     record: dict[str, Any] = {
@@ -114,10 +115,12 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         if resumed is not None:  # add the epochs trained before the interruption
             record["train_seconds"] += resumed.seconds
             record["training_resumed_at_epoch"] = resumed.epoch
-        # The trained agent, for re-evaluation with other planner settings (not committed).
+        # The trained agent in float32 (not committed), and in float16 (small enough to
+        # commit): the record evaluates the float16 one, so loading its file reproduces it.
         agent.save(checkpoint_path(results_dir, spec))
         record["config"] = agent.config_dict()
         record["training"] = agent.train_summary()
+        agent, record["weights"] = save_half_weights(agent, results_dir, spec)
         evaluation_start = time.perf_counter()
         evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
         _maybe_plot_latent_map(agent, spec, Path(results_dir))
@@ -147,7 +150,9 @@ def _reevaluate(
     from pcc_agent.evaluation import evaluate_control
     from pcc_agent.planning import PLANNER_REVISION
 
-    agent = PCCAgent.load(checkpoint_path(results_dir, spec))
+    saved = saved_agent_path(record, results_dir, spec)
+    assert saved is not None  # checked by the caller
+    agent = PCCAgent.load(saved)
     planner = preset_for(spec).planner
     agent.set_planner(planner)
     start = time.perf_counter()

@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from pcc_bench.records import REFERENCE_METHODS, checkpoint_path, load_finished_run
+from pcc_bench.records import REFERENCE_METHODS, load_finished_run
+from pcc_bench.weights import saved_agent_path
 
 #: Above this many models a per-task table would not fit a terminal; the summary suffices.
 MAX_MODELS_SHOWN = 5
@@ -70,8 +71,9 @@ def show_control(runs: Sequence[Any], results_dir: Path) -> list[Path]:
             if method in REFERENCE_METHODS:
                 continue
             seed, record = max(by_seed.items(), key=lambda item: np.mean(item[1]["percentages"]))
-            agent_file = checkpoint_path(results_dir, specs[(env_id, noise, method, seed)])
-            if not agent_file.exists():
+            agent_file = saved_agent_path(record, results_dir,
+                                          specs[(env_id, noise, method, seed)])
+            if agent_file is None:
                 continue
             pictures.append(_draw_best(agent_file, env_id, record, results_dir, method, noise))
     for picture in pictures:

@@ -103,6 +103,52 @@ def test_load_refuses_mismatched_env_and_corrupt_file(trained, tmp_path):
         PCCAgent.load(bad)
 
 
+def test_safetensors_round_trip_float32_exact_and_float16_rounded(trained, tmp_path):
+    agent, _ = trained
+    obs, _ = gym.make(ENV_ID).reset(seed=5)
+    agent.set_planner()
+    expected, _ = agent.predict(obs)
+    full = tmp_path / "agent.safetensors"
+    agent.save(full)
+    agent.save(tmp_path / "half.safetensors", half=True)
+    assert (tmp_path / "half.safetensors").stat().st_size < 0.6 * full.stat().st_size
+    loaded, _ = PCCAgent.load(full).predict(obs)
+    np.testing.assert_allclose(loaded, expected, atol=1e-6)
+    half = PCCAgent.load(tmp_path / "half.safetensors")
+    for name, value in agent.model.state_dict().items():
+        got = half.model.state_dict()[name]
+        assert got.dtype == value.dtype  # computed in float32 again
+        if value.is_floating_point():
+            torch.testing.assert_close(got, value.to(torch.float16).to(value.dtype),
+                                       rtol=0, atol=0)
+    assert agent._goal_obs is not None
+    np.testing.assert_array_equal(half._goal_obs, agent._goal_obs)
+
+
+def test_safetensors_refuses_damaged_files_and_impossible_requests(trained, tmp_path):
+    agent, _ = trained
+    path = tmp_path / "agent.safetensors"
+    agent.save(path, half=True)
+    with pytest.raises(ValueError, match="safetensors"):
+        agent.save(tmp_path / "agent.pt", half=True)
+    cut = tmp_path / "cut.safetensors"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with pytest.raises(CheckpointError, match="truncated or corrupt"):
+        PCCAgent.load(cut)
+    empty = tmp_path / "empty.safetensors"
+    empty.write_bytes(b"")
+    with pytest.raises(CheckpointError, match="empty"):
+        PCCAgent.load(empty)
+    from safetensors.torch import save_file
+
+    foreign = tmp_path / "foreign.safetensors"
+    save_file({"w": torch.zeros(2)}, foreign)
+    with pytest.raises(CheckpointError, match="not a pcc_agent checkpoint"):
+        PCCAgent.load(foreign)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        PCCAgent.load(tmp_path / "missing.safetensors")
+
+
 def test_two_seeded_runs_give_same_actions(trained):
     agent, cache = trained
     other = PCCAgent(ENV_ID, method="pcc", preset=tiny_preset(), seed=3, data_cache_dir=cache)

@@ -284,6 +284,41 @@ def test_run_with_old_planner_settings_is_reevaluated_not_retrained(tmp_path):
     assert load_finished_run(path, spec) is not None
 
 
+def test_record_is_reproduced_by_its_float16_weights_alone(tmp_path):
+    from pcc_agent.agent import PCCAgent
+    from pcc_agent.evaluation import evaluate_control
+    from pcc_bench.records import checkpoint_path
+    from pcc_bench.weights import export_run, sha256_of
+
+    spec = tiny_spec(seed=2)
+    record = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    weights = tmp_path / record["weights"]["file"]
+    assert record["weights"]["dtype"] == "float16"
+    assert record["weights"]["sha256"] == sha256_of(weights)
+    evaluation = evaluate_control(PCCAgent.load(weights), spec.env_id, record["task_seeds"])
+    assert [t.percent_in_goal for t in evaluation.tasks] == record["percentages"]
+    # An evaluation change re-runs from the committed weights, without the float32 checkpoint.
+    checkpoint_path(tmp_path, spec).unlink()
+    path = tmp_path / spec.relative_path
+    changed = json.loads(path.read_text())
+    changed["config"]["planner"]["plan_length"] = 3
+    path.write_text(json.dumps(changed))
+    again = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    assert again["reevaluated"] is True and again["percentages"] == record["percentages"]
+    # A record made before the weights existed gets them from its float32 checkpoint.
+    old = tiny_spec(seed=3)
+    execute_run(old, tmp_path, str(tmp_path / "data"))
+    old_path = tmp_path / old.relative_path
+    stripped = json.loads(old_path.read_text())
+    (tmp_path / stripped.pop("weights")["file"]).unlink()
+    old_path.write_text(json.dumps(stripped))
+    assert export_run(old_path, tmp_path).startswith("exported")
+    exported = json.loads(old_path.read_text())
+    assert exported["percentages_float32"] == stripped["percentages"]
+    assert (tmp_path / exported["weights"]["file"]).exists()
+    assert export_run(old_path, tmp_path) == "has weights"
+
+
 def test_explicit_model_seeds_select_the_grid_cells():
     from pcc_bench.grid import expand_grid
     from pcc_bench.presets import REPRODUCE_PRESETS

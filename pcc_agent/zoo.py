@@ -1,0 +1,121 @@
+"""Pretrained agents shipped with the package: load one and control at once.
+
+Each entry is a model of a committed benchmark row, stored as float16 safetensors weights
+inside the package (``pcc_agent/pretrained/``). Its ``percentages`` are those measured with
+that very file on the env's 10 evaluation tasks, so evaluating it reproduces them (exactly
+on the CPU that measured them; a CPU with other vector instructions may round differently).
+
+Example:
+    >>> from pcc_agent.zoo import load_pretrained
+    >>> agent = load_pretrained("planar-pcc")  # doctest: +SKIP
+    >>> action, _ = agent.predict(obs)  # doctest: +SKIP
+
+From the shell: ``pcc evaluate planar-pcc``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pcc_agent.agent import PCCAgent
+
+__all__ = ["PRETRAINED", "PretrainedModel", "load_pretrained", "pretrained_path"]
+
+_DIRECTORY = Path(__file__).resolve().parent / "pretrained"
+
+
+@dataclass(frozen=True)
+class PretrainedModel:
+    """One shipped agent and what it scored.
+
+    Attributes:
+        name: Registry name (``pcc evaluate NAME``).
+        env_id: The env it was trained on and controls.
+        method: Its loss (``pcc``, ``e2c``, ...).
+        file: File name in ``pcc_agent/pretrained/``.
+        sha256: Digest of the file (checked on load).
+        task_seed: Base seed of the evaluation tasks it was scored on (10 tasks).
+        percentages: % of steps in goal per task, measured with this file.
+        source: The committed record it is the model of, and the command that trained it.
+        machine: The CPU that measured ``percentages``.
+        torch_cpu_capability: Torch's CPU kernel level on that machine
+            (``torch.backends.cpu.get_cpu_capability()``); the same level rounds the same.
+    """
+
+    name: str
+    env_id: str
+    method: str
+    file: str
+    sha256: str
+    task_seed: int
+    percentages: tuple[float, ...]
+    source: str
+    machine: str
+    torch_cpu_capability: str
+
+    @property
+    def mean(self) -> float:
+        """Mean % in goal over the evaluation tasks."""
+        return sum(self.percentages) / len(self.percentages)
+
+
+#: The shipped agents, one row each.
+PRETRAINED: dict[str, PretrainedModel] = {
+    model.name: model
+    for model in (
+        PretrainedModel(
+            name="planar-pcc",
+            env_id="pcc/Planar-v0",
+            method="pcc",
+            file="planar_pcc.safetensors",
+            sha256="6dcb6209d3f3f58c432b857ecfc3c9cbaac0176da8819b4d7812225343dde280",
+            task_seed=2020,
+            percentages=(75.0,) * 10,
+            source="results/quick/runs/quick/pcc_Planar-v0/noise0.0/pcc/seed0.json "
+                   "(`pcc reproduce`, the quick preset, model 0; 250 epochs on one core)",
+            machine="2-core Intel Xeon (AVX-512, AMX)",
+            torch_cpu_capability="AVX512",
+        ),
+    )
+}
+
+
+def pretrained_path(name: str) -> Path:
+    """The file of a shipped agent, its digest checked.
+
+    Raises:
+        KeyError: No shipped agent has this name (the message lists them).
+        FileNotFoundError: The package was installed without its data files.
+        ValueError: The file's digest differs from the registry's (damaged or replaced).
+    """
+    if name not in PRETRAINED:
+        raise KeyError(f"No pretrained agent named {name!r}; shipped: {sorted(PRETRAINED)}.")
+    entry = PRETRAINED[name]
+    path = _DIRECTORY / entry.file
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"Pretrained agent file {path} is missing: the package was installed without its "
+            "data files. Reinstall pcc-control."
+        )
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    if digest != entry.sha256:
+        raise ValueError(f"Pretrained agent file {path} is damaged or was replaced (SHA-256 "
+                         f"{digest}, expected {entry.sha256}). Reinstall pcc-control.")
+    return path
+
+
+def load_pretrained(name: str, env: Any = None, device: str = "auto") -> PCCAgent:
+    """Load a shipped agent (see :data:`PRETRAINED`), ready to ``predict``.
+
+    Args:
+        name: Registry name, e.g. ``"planar-pcc"``.
+        env: The env to control (default: ``gym.make`` of the agent's env id).
+        device: Torch device (``"auto"``: a GPU when present).
+    """
+    from pcc_agent.agent import PCCAgent
+
+    return PCCAgent.load(pretrained_path(name), env=env, device=device)
