@@ -228,8 +228,10 @@ def preset_for(spec: RunSpec) -> Any:
         preset = replace(preset, train=replace(preset.train, epochs=spec.max_epochs))
     if spec.patience is not None:
         preset = replace(preset, train=replace(preset.train, patience=spec.patience))
-    if spec.flush_denormals:
-        preset = replace(preset, train=replace(preset.train, flush_denormals=True))
+    # Off unless the run asks for it: the library's default turned on after most committed
+    # runs were made without it, and a grid's recipe must not change under its records.
+    preset = replace(preset, train=replace(preset.train,
+                                           flush_denormals=bool(spec.flush_denormals)))
     if spec.learning_rate is not None:
         preset = replace(preset, train=replace(preset.train, lr=spec.learning_rate))
     if spec.num_samples is not None:

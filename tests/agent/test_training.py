@@ -86,8 +86,8 @@ def test_flushed_denormals_is_scoped_and_reaches_the_training():
            epoch_callback=lambda epoch, metrics: modes.append(denormals_flushed()))
     assert modes == [True] * TRAIN.epochs and not denormals_flushed()
     modes.clear()
-    _train(planar_like(96), epoch_callback=lambda epoch, metrics: modes.append(
-        denormals_flushed()))
+    _train(planar_like(96), config=dataclasses.replace(TRAIN, flush_denormals=False),
+           epoch_callback=lambda epoch, metrics: modes.append(denormals_flushed()))
     assert modes == [False] * TRAIN.epochs
 
 
@@ -252,3 +252,13 @@ def test_latent_formation_benchmark_logs_r2(tmp_path):
     (row,) = payload["rows"]
     assert row["epoch"] == 1 and -1.0 <= row["r2"] <= 1.0 and row["encoder_std"] > 0
     assert payload["model_config"]["input_standardization"] is True
+
+
+def test_subnormal_flushing_is_on_by_default_and_off_for_configs_saved_before_it():
+    from pcc_agent.config import TrainConfig
+
+    assert TrainConfig().flush_denormals is True
+    saved = TrainConfig().to_dict()
+    del saved["flush_denormals"]  # as written before the field existed
+    assert TrainConfig.from_dict(saved).flush_denormals is False
+    assert TrainConfig.from_dict(TrainConfig().to_dict()).flush_denormals is True
