@@ -422,6 +422,21 @@ class EnvPreset:
             planner=PlannerConfig(**planner),
         )
 
+    def with_training(self, **changes: Any) -> EnvPreset:
+        """A copy with some training settings changed.
+
+        Example:
+            >>> from pcc_agent.presets import get_preset
+            >>> quick = get_preset("pcc/Planar-v0", "fast").with_training(lr=1.5e-3, epochs=250)
+            >>> quick.train.lr, quick.train.epochs
+            (0.0015, 250)
+
+        Raises:
+            TypeError: A name that is not a :class:`TrainConfig` field.
+            ValueError: A value :class:`TrainConfig` refuses.
+        """
+        return dataclasses.replace(self, train=dataclasses.replace(self.train, **changes))
+
 
 @dataclass(frozen=True)
 class DomainPresets:

@@ -224,16 +224,11 @@ def preset_for(spec: RunSpec) -> Any:
     from pcc_agent.presets import get_preset
 
     preset = get_preset(spec.env_id, spec.model_variant)
-    if spec.max_epochs is not None:
-        preset = replace(preset, train=replace(preset.train, epochs=spec.max_epochs))
-    if spec.patience is not None:
-        preset = replace(preset, train=replace(preset.train, patience=spec.patience))
-    # Off unless the run asks for it: the library's default turned on after most committed
-    # runs were made without it, and a grid's recipe must not change under its records.
-    preset = replace(preset, train=replace(preset.train,
-                                           flush_denormals=bool(spec.flush_denormals)))
-    if spec.learning_rate is not None:
-        preset = replace(preset, train=replace(preset.train, lr=spec.learning_rate))
+    overrides = {"epochs": spec.max_epochs, "patience": spec.patience, "lr": spec.learning_rate}
+    # Flushing is off unless the run asks for it: the library's default turned on after most
+    # committed runs were made without it, and a grid's recipe must not change under them.
+    preset = preset.with_training(flush_denormals=bool(spec.flush_denormals),
+                                  **{k: v for k, v in overrides.items() if v is not None})
     if spec.num_samples is not None:
         preset = replace(preset, data=replace(preset.data, num_samples=spec.num_samples))
     return replace(preset, data=replace(preset.data, noise_std=spec.noise_std))
