@@ -95,6 +95,35 @@ def angle_of(env: gym.Env) -> float:
     return float((theta + np.pi) % (2 * np.pi) - np.pi)
 
 
+def collect_transitions(env: gym.Env, num_samples: int, rollout_steps: int,
+                        seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(obs, action, next_obs)`` from short random-torque episodes over the whole state space.
+
+    Pendulum's own reset draws the angle in [-pi, pi] and the angular velocity in [-1, 1]
+    only; a swing-up passes through velocities up to about 6 rad/s, so each episode starts
+    from ``reset(options={"x_init": pi, "y_init": 8})`` (velocity in [-8, 8], the env's
+    limit). The first step of an episode only fills the frame stack (its two frames are the
+    same image, whatever the velocity) and is not recorded.
+    """
+    rng = np.random.default_rng(seed)
+    env.action_space.seed(int(rng.integers(2**31)))
+    env.reset(seed=int(rng.integers(2**31)))
+    observations, actions, next_observations = [], [], []
+    while len(observations) < num_samples:
+        obs, _ = env.reset(options={"x_init": np.pi, "y_init": 8.0})
+        obs, *_ = env.step(env.action_space.sample())
+        for _ in range(rollout_steps):
+            action = env.action_space.sample()
+            next_obs, *_ = env.step(action)
+            observations.append(obs)
+            actions.append(action)
+            next_observations.append(next_obs)
+            obs = next_obs
+    return (np.asarray(observations[:num_samples], np.uint8),
+            np.asarray(actions[:num_samples], np.float32),
+            np.asarray(next_observations[:num_samples], np.uint8))
+
+
 def make_agent(env: gym.Env, seed: int, epochs: int, device: str = "auto") -> Any:
     """A ``PCCAgent`` for the pixel env: the pendulum-size preset, the swing-up planner."""
     from pcc_agent import PCCAgent
@@ -103,7 +132,7 @@ def make_agent(env: gym.Env, seed: int, epochs: int, device: str = "auto") -> An
     preset = default_preset_for_spaces(env.observation_space, env.action_space)
     # Subnormals flushed: weight decay drives the weights of never-lit pixels (most of a
     # pendulum frame) into the subnormal range, where Intel CPUs multiply many times slower.
-    train = dataclasses.replace(preset.train, epochs=epochs, flush_denormals=True)
+    train = dataclasses.replace(preset.train, epochs=epochs)  # subnormals flushed (default)
     preset = dataclasses.replace(preset, train=train,
                                  planner=get_preset("pcc/PendulumSwingUp-v0").planner)
     return PCCAgent(env, method="pcc", preset=preset, seed=seed, device=device)
@@ -137,7 +166,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--out", help="write the result as JSON here")
     args = parser.parse_args(argv)
 
-    train_env = make_pixel_env(max_episode_steps=args.rollout_steps)
+    train_env = make_pixel_env(max_episode_steps=args.rollout_steps + 1)
     eval_env = make_pixel_env(max_episode_steps=args.steps + 2)  # + the 2 steps of start_at
     agent = make_agent(train_env, args.seed, args.epochs, args.device)
     agent.set_goal(goal_observation(eval_env))  # the goal from an image of the upright pole
@@ -146,7 +175,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     def stop_after_time(locals_: dict[str, Any], globals_: dict[str, Any]) -> bool:
         return time.perf_counter() - start < 60.0 * args.train_minutes
 
-    agent.learn(total_timesteps=args.samples, callback=stop_after_time, progress_bar=True)
+    data = collect_transitions(train_env, args.samples, args.rollout_steps, args.seed)
+    agent.learn(dataset=data, callback=stop_after_time, progress_bar=True)
     train_seconds = time.perf_counter() - start
     percentages = [control(agent, eval_env, args.seed + 1000 + k, args.steps)
                    for k in range(args.episodes)]
