@@ -177,6 +177,31 @@ def training_progress(results_dir: str | Path, spec: RunSpec) -> str:
             f"validation loss {best_text} ({epoch_seconds:.1f} s/epoch)")
 
 
+def stop_reason_of(record: dict[str, Any]) -> str | None:
+    """Why a run's training ended (``pcc_agent.training.STOP_REASONS``), or None.
+
+    None: the run trained nothing (oracle, no action) or its record does not say.
+
+    Records written before ``stop_reason`` was stored (the committed ones among them) have it
+    inferred from their ``converged`` and ``diverged`` flags and their message.
+    """
+    training = record.get("training")
+    if not isinstance(training, dict) or not training:
+        return None
+    if training.get("stop_reason"):
+        return str(training["stop_reason"])
+    message = str(training.get("message", ""))
+    if training.get("diverged"):
+        return "diverged"
+    if training.get("converged"):
+        return "early_stopping"
+    if message.startswith("Reached the maximum"):
+        return "epoch_cap"
+    if "callback" in message:
+        return "callback"
+    return None
+
+
 def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any] | None:
     """Return a finished run's record, or None if the file is missing, partial or stale.
 

@@ -16,7 +16,7 @@ from pcc_agent.planning import PLANNER_REVISION
 from pcc_bench.aggregation import aggregate, interquartile_mean
 from pcc_bench.costs import estimate_cost
 from pcc_bench.records import RunSpec, load_finished_run
-from pcc_bench.runs import execute_run
+from pcc_bench.runs import execute_run, report_line
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -73,6 +73,9 @@ def test_finished_run_is_skipped_and_partial_run_redone(tmp_path):
     assert record["status"] == "done" and path.exists()
     assert len(record["percentages"]) == 1 and len(record["tasks"][0]["states"]) > 0
     assert record["machine"]["torch_cpu_capability"]  # which kernels made the numbers
+    assert record["training"]["stop_reason"] == "epoch_cap"  # max_epochs=1
+    assert "(train " in report_line(1, 1, record) and ": 1 epochs, the cap; control " in (
+        report_line(1, 1, record))
     again = execute_run(spec, tmp_path, str(tmp_path / "data"))
     assert again.get("skipped") is True
     # A run killed mid-way leaves at most a truncated or unfinished file: it is redone.
@@ -719,3 +722,24 @@ def test_no_action_run_scores_the_starts_inside_the_goal_and_is_skipped_once_don
     noisy = markdown_table([{**pcc, "noise_std": 2.0**0.5}])
     assert "| noise variance |" in noisy and "| pcc | 2 |" in noisy
     assert f"| - | {pcc['floor_mean']:.1f} |" in table
+
+
+def test_stop_reason_of_old_records_is_inferred_and_new_ones_are_read():
+    from pcc_bench.records import stop_reason_of
+
+    assert stop_reason_of({"spec": {"method": "oracle"}}) is None  # trained nothing
+    old = {"epochs": 209, "converged": True, "diverged": False,
+           "message": "Early stopping: no validation improvement for 100 epochs."}
+    assert stop_reason_of({"training": old}) == "early_stopping"
+    capped = {**old, "converged": False, "message": "Reached the maximum of 250 epochs."}
+    assert stop_reason_of({"training": capped}) == "epoch_cap"
+    assert stop_reason_of({"training": {**capped, "diverged": True}}) == "diverged"
+    assert stop_reason_of({"training": {**capped, "stop_reason": "callback"}}) == "callback"
+    # The committed quick records predate the field; the grid's line still says why.
+    quick = ROOT / "results" / "quick" / "runs"
+    if not quick.exists():
+        pytest.skip("no committed results (not a source checkout)")
+    lines = sorted(report_line(1, 1, json.loads(p.read_text())) for p in quick.rglob("*.json")
+                   if "/pcc/" in p.as_posix())
+    assert sum(": 250 epochs, the cap;" in line for line in lines) == 2
+    assert sum(": early stop at epoch 209, best 109;" in line for line in lines) == 1
