@@ -69,7 +69,7 @@ def cpu_name() -> str:
 
 
 def machine_info() -> dict[str, Any]:
-    """The host, the SIMD kernels torch picked on it and the CPU's SIMD features.
+    """The host, its CPU model, the SIMD kernels torch picked on it and the CPU's SIMD features.
 
     Kernels for different instruction sets round differently (oneDNN's convolutions limited
     to AVX2 train other SAC weights than its AVX-512 ones), so bit-identical reruns are only
@@ -84,6 +84,7 @@ def machine_info() -> dict[str, Any]:
     simd = sorted({flag for flag in cpuinfo if flag.startswith(("avx", "amx", "fma"))})
     return {
         "platform": platform.platform(),
+        "cpu": cpu_name(),
         "cpu_count": os.cpu_count(),
         "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
         "simd_flags": simd,
