@@ -300,7 +300,8 @@ class PCCAgent:
                 set size (so ``CheckpointCallback`` files and ``EvalCallback`` times differ
                 from step to step); returning False stops training.
             log_interval: Epochs between logger dumps.
-            progress_bar: Show a progress bar over epochs with the loss terms.
+            progress_bar: Show a progress bar over epochs (training and validation loss, best
+                so far) and, when training ends, one line on why it stopped.
             reset_num_timesteps: Start ``num_timesteps`` from 0 (else continue counting).
             dataset: Train on these transitions instead of collecting: a
                 ``pcc_envs.data.TransitionDataset`` or a tuple ``(obs, action, next_obs)``,

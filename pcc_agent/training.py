@@ -122,7 +122,14 @@ class TrainResult:
         wall_time: Seconds spent in this call (a resumed run's earlier sittings excluded).
         converged: Early stopping triggered (no improvement for ``patience`` epochs).
         diverged: Training stopped on a non-finite or exploding loss.
-        message: Human-readable reason of the stop.
+        message: Human-readable reason of the stop, one line (the line the progress bar
+            prints when training ends), e.g. ``"stopped at epoch 212 of 250: no validation
+            improvement for 100 epochs (best 171.3 at epoch 112); restored the best
+            weights"``.
+        stop_reason: Why training ended, one of :data:`STOP_REASONS`: ``"epoch_cap"``,
+            ``"early_stopping"``, ``"diverged"`` or ``"callback"`` (the epoch callback
+            returned False: a time budget, an SB3 callback). An interrupted training (Ctrl-C)
+            returns no result; its bar prints ``"interrupted"`` as the reason.
     """
 
     history: list[dict[str, float]] = field(default_factory=list)
@@ -133,6 +140,7 @@ class TrainResult:
     converged: bool = False
     diverged: bool = False
     message: str = ""
+    stop_reason: str = ""
 
     def seconds_per_epoch(self) -> float | None:
         """Mean wall-clock seconds of one epoch, over every epoch of every sitting.
@@ -152,7 +160,7 @@ class TrainResult:
 
         Returns:
             ``epochs, best_epoch, best_validation_loss, wall_time, seconds_per_epoch,
-            converged, diverged, message, final`` (the last history row).
+            converged, diverged, stop_reason, message, final`` (the last history row).
         """
         return {
             "epochs": self.epochs,
@@ -163,6 +171,7 @@ class TrainResult:
             "seconds_per_epoch": self.seconds_per_epoch(),
             "converged": self.converged,
             "diverged": self.diverged,
+            "stop_reason": self.stop_reason,
             "message": self.message,
             "final": dict(self.history[-1]) if self.history else {},
         }
@@ -180,6 +189,47 @@ def _make_adam(model: torch.nn.Module, config: TrainConfig) -> torch.optim.Adam:
 
 EpochCallback = Callable[[int, dict[str, float]], bool | None]
 
+#: Why a training ended (:attr:`TrainResult.stop_reason`); ``"interrupted"`` (Ctrl-C) is only
+#: printed, an interrupted training returns no result.
+STOP_REASONS = ("epoch_cap", "early_stopping", "diverged", "callback", "interrupted")
+
+
+def stop_line(reason: str, epochs: int, cap: int, best_loss: float, best_epoch: int,
+              detail: str = "") -> str:
+    """The one line that says why a training ended.
+
+    E.g. ``"stopped at epoch 212 of 250: no validation improvement for 100 epochs (best 171.3
+    at epoch 112); restored the best weights"``.
+
+    Args:
+        reason: One of :data:`STOP_REASONS`.
+        epochs: Epochs run (resumed ones included).
+        cap: The epoch cap (``TrainConfig.epochs``).
+        best_loss: Best validation loss (inf: no epoch finished).
+        best_epoch: Its epoch (0: none).
+        detail: The cause, for ``"early_stopping"`` (the patience) and ``"diverged"``.
+    """
+    best = (f"best {best_loss:.4g} at epoch {best_epoch}" if best_epoch > 0
+            and math.isfinite(best_loss) else "no finished epoch")
+    if reason == "interrupted":
+        return f"interrupted at epoch {epochs} of {cap} ({best}); nothing returned"
+    cause = {
+        "epoch_cap": "reached the epoch cap",
+        "early_stopping": f"no validation improvement for {detail} epochs",
+        "diverged": f"training diverged in epoch {epochs + 1} ({detail})",
+        "callback": "the epoch callback asked to stop (a time budget, an SB3 callback)",
+    }[reason]
+    if reason == "diverged":
+        weights = "restored the weights of the best epoch" if best_epoch > 0 else (
+            "kept the initial weights")
+    elif best_epoch == epochs:
+        weights = "the last epoch is the best"
+    elif best_epoch > 0:
+        weights = "restored the best weights"
+    else:
+        weights = "no epoch finished"
+    return f"stopped at epoch {epochs} of {cap}: {cause} ({best}); {weights}"
+
 
 class TrainingDivergedError(RuntimeError):
     """Raised internally when the loss becomes non-finite or explodes."""
@@ -194,8 +244,11 @@ class Trainer:
         config: Optimization and loss hyper-parameters.
         method: Registry name, e.g. ``"pcc"``.
         device: ``"auto"``, ``"cpu"``, ``"cuda"``, or a ``torch.device``.
-        progress_bar: Show a tqdm bar over epochs (advanced every batch) with the main loss
-            terms of the last epoch.
+        progress_bar: Show a tqdm bar over whole epochs (total: the epoch cap; the remaining
+            time is tqdm's, from the epoch times so far) whose postfix holds the last epoch's
+            training and validation losses and the best validation loss with its epoch
+            (``best=171.3@112``); when training ends (also on Ctrl-C), one line under it says
+            why (:attr:`TrainResult.message`).
         log_dir: Directory of the Stable-Baselines3 logger (stdout, csv, tensorboard when
             installed); None disables logging.
         checkpoint_path: File written atomically every ``checkpoint_every`` epochs (current
@@ -411,11 +464,13 @@ class Trainer:
         if self.progress_bar:
             from tqdm.auto import tqdm
 
+            # Whole epochs: the rate and the remaining time are tqdm's, from the epoch times.
             bar = tqdm(total=self.config.epochs, initial=result.epochs,
-                       desc=f"{self.method} training", unit="epoch",
-                       bar_format="{l_bar}{bar}| {n:.2f}/{total_fmt} [{elapsed}<{remaining}"
-                                  "{postfix}]")
+                       desc=f"{self.method} training", unit="epoch", dynamic_ncols=True)
+            if result.history:  # a resumed run shows where it stands from the start
+                bar.set_postfix(self._postfix(result.history[-1], result), refresh=False)
         self.model.train()
+        ending = ""  # the line printed under the bar
         try:
             while result.epochs < self.config.epochs:
                 epoch_start = time.perf_counter()
@@ -438,18 +493,16 @@ class Trainer:
                         for key, value in metrics.items():
                             sums[key] = sums.get(key, 0.0) + value * len(idx)
                         seen += len(idx)
-                        if bar is not None:
-                            bar.update(len(idx) / len(order))
                     if not all(math.isfinite(float(p.detach().sum()))
                                for p in self.model.parameters()):
                         raise TrainingDivergedError("weights became non-finite")
                 except TrainingDivergedError as error:
                     self.model.load_state_dict(last_good)
                     result.diverged = True
-                    result.message = (
-                        f"Training diverged in epoch {result.epochs + 1} ({error}); restored the "
-                        "weights of the last good epoch. Try a lower TrainConfig.lr, set "
-                        "grad_clip_norm, or check the data (uint8 images, actions in [-1, 1])."
+                    self._stop(result, "diverged", str(error))
+                    result.message += (
+                        ". Try a lower TrainConfig.lr, set grad_clip_norm, or check the data "
+                        "(uint8 images, actions in [-1, 1])"
                     )
                     break
                 result.epochs += 1
@@ -471,33 +524,35 @@ class Trainer:
                     state["bad_epochs"] += 1
                 self._log(row)
                 if bar is not None:
-                    bar.n = result.epochs  # remove float drift of the fractional updates
-                    bar.set_postfix(self._postfix(row))
+                    bar.set_postfix(self._postfix(row, result), refresh=False)
+                    bar.update(1)
                 if self.epoch_callback is not None:
                     metrics = {k.split("/", 1)[1]: v for k, v in row.items()
                                if k.startswith("train/")}
                     metrics.update(val_loss=val_loss,
                                    epoch_seconds=row["time/epoch_seconds"])
                     if self.epoch_callback(result.epochs, metrics) is False:
-                        result.message = (
-                            f"Stopped by the epoch callback after epoch {result.epochs}.")
+                        self._stop(result, "callback")
                         break
                 if (self.config.patience > 0 and state["bad_epochs"] >= self.config.patience
                         and result.epochs >= self.config.min_epochs):
                     result.converged = True
-                    result.message = (
-                        f"Early stopping: no validation improvement for {self.config.patience} "
-                        f"epochs (best {result.best_validation_loss:.4f} at epoch "
-                        f"{result.best_epoch})."
-                    )
+                    self._stop(result, "early_stopping", str(self.config.patience))
                     break
                 if result.epochs % self.checkpoint_every == 0:
                     self._save(result, state, finished=False)
             else:
-                result.message = f"Reached the maximum of {self.config.epochs} epochs."
+                self._stop(result, "epoch_cap")
+            ending = result.message
+        except KeyboardInterrupt:
+            ending = stop_line("interrupted", result.epochs, self.config.epochs,
+                               result.best_validation_loss, result.best_epoch)
+            raise
         finally:
             if bar is not None:
                 bar.close()
+                if ending:  # one line under the bar on why training ended
+                    print(ending, flush=True)
             if self._logger is not None:
                 self._logger.close()
         current = None
@@ -509,12 +564,19 @@ class Trainer:
         self._save(result, state, finished=True, current_state_dict=current)
         return result
 
+    def _stop(self, result: TrainResult, reason: str, detail: str = "") -> None:
+        """Record why training ended: ``result.stop_reason`` and its line, ``result.message``."""
+        result.stop_reason = reason
+        result.message = stop_line(reason, result.epochs, self.config.epochs,
+                                   result.best_validation_loss, result.best_epoch, detail)
+
     @staticmethod
-    def _postfix(row: Mapping[str, float]) -> dict[str, str]:
-        keys = ("train/loss", "val/loss", "train/prediction", "train/consistency",
-                "train/curvature")
-        return {k.split("/")[-1] if k != "val/loss" else "val": f"{row[k]:.3g}"
-                for k in keys if k in row}
+    def _postfix(row: Mapping[str, float], result: TrainResult) -> dict[str, str]:
+        """The bar's postfix: the epoch's training and validation losses, the best so far."""
+        postfix = {"loss": f"{row['train/loss']:.4g}", "val": f"{row['val/loss']:.4g}"}
+        if result.best_epoch > 0:
+            postfix["best"] = f"{result.best_validation_loss:.4g}@{result.best_epoch}"
+        return postfix
 
     def _log(self, row: Mapping[str, float]) -> None:
         if self._logger is None:
@@ -573,7 +635,8 @@ def train_embedding(
             ``"pcc-no-curvature"`` or ``"pcc-amortized"``.
         device: ``"auto"`` (CUDA when available), ``"cpu"``, ``"cuda"``.
         seed: Overrides ``train_config.seed`` when given.
-        progress_bar: Show a tqdm progress bar.
+        progress_bar: Show a tqdm bar over epochs and the line on why training stopped
+            (see :class:`Trainer`).
         log_dir: Stable-Baselines3 logger directory (None: no logging).
         checkpoint_path: Atomic checkpoint file (None: no checkpoints).
         resume: Continue from ``checkpoint_path``.

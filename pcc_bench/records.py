@@ -69,7 +69,7 @@ def cpu_name() -> str:
 
 
 def machine_info() -> dict[str, Any]:
-    """The host, the SIMD kernels torch picked on it and the CPU's SIMD features.
+    """The host, its CPU model, the SIMD kernels torch picked on it and the CPU's SIMD features.
 
     Kernels for different instruction sets round differently (oneDNN's convolutions limited
     to AVX2 train other SAC weights than its AVX-512 ones), so bit-identical reruns are only
@@ -84,6 +84,7 @@ def machine_info() -> dict[str, Any]:
     simd = sorted({flag for flag in cpuinfo if flag.startswith(("avx", "amx", "fma"))})
     return {
         "platform": platform.platform(),
+        "cpu": cpu_name(),
         "cpu_count": os.cpu_count(),
         "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
         "simd_flags": simd,
@@ -184,6 +185,31 @@ def training_progress(results_dir: str | Path, spec: RunSpec) -> str:
     cap = spec.max_epochs or get_preset(spec.env_id, spec.model_variant).train.epochs
     return (f"{label}: training, epoch {extra.get('epochs', 0)} of at most {cap}, best "
             f"validation loss {best_text} ({epoch_seconds:.1f} s/epoch)")
+
+
+def stop_reason_of(record: dict[str, Any]) -> str | None:
+    """Why a run's training ended (``pcc_agent.training.STOP_REASONS``), or None.
+
+    None: the run trained nothing (oracle, no action) or its record does not say.
+
+    Records written before ``stop_reason`` was stored (the committed ones among them) have it
+    inferred from their ``converged`` and ``diverged`` flags and their message.
+    """
+    training = record.get("training")
+    if not isinstance(training, dict) or not training:
+        return None
+    if training.get("stop_reason"):
+        return str(training["stop_reason"])
+    message = str(training.get("message", ""))
+    if training.get("diverged"):
+        return "diverged"
+    if training.get("converged"):
+        return "early_stopping"
+    if message.startswith("Reached the maximum"):
+        return "epoch_cap"
+    if "callback" in message:
+        return "callback"
+    return None
 
 
 def load_finished_run(path: Path, spec: RunSpec | None = None) -> dict[str, Any] | None:

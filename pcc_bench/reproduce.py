@@ -38,7 +38,7 @@ from pcc_bench.arguments import (
     positive_float,
     positive_int,
 )
-from pcc_bench.costs import estimate_cost
+from pcc_bench.costs import status_lines
 from pcc_bench.executors import interrupt
 from pcc_bench.grid import expand_grid, run_grid
 from pcc_bench.plots import summary_bar_chart
@@ -179,7 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--status",
         action="store_true",
         help="Only print where each run of the grid stands (done, training at epoch E with "
-        "its best validation loss, or not started), e.g. while the grid runs elsewhere.",
+        "its best validation loss, or not started), e.g. while the grid runs elsewhere, and "
+        "the estimated wall time of the rest (from finished runs of the same kind).",
     )
     return parser
 
@@ -233,15 +234,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.status:
             print("\n".join(training_progress(results_dir, run) for run in runs))
         pending = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
-        cost = estimate_cost(pending, load_records(results_dir) if pending else ())
-        workers = max(1, args.workers)
-        print(
-            f"Preset {preset.name!r}: {len(runs)} runs, {len(pending)} to run, estimated "
-            f"{cost.expected_seconds / 3600 / workers:.1f} h on {args.workers} CPU worker(s) "
-            f"({cost.runs_from_records} of {len(pending)} from finished runs of the same kind; "
-            f"at most {cost.upper_seconds / 3600 / workers:.1f} h if every model trains to its "
-            "epoch cap; CNN 'paper' models want a GPU)."
-        )
+        print("\n".join(status_lines(preset.name, runs, pending, results_dir,
+                                     max(1, args.workers), args.backend)))
         if args.status:
             return 0
         if preset.name != args.preset:

@@ -28,6 +28,7 @@ from pcc_bench.records import (
     resume_point,
     same_recipe,
     same_spec,
+    stop_reason_of,
     training_checkpoint_path,
 )
 from pcc_bench.weights import save_half_weights, saved_agent_path
@@ -183,10 +184,33 @@ def _maybe_plot_latent_map(agent: Any, spec: RunSpec, results_dir: Path) -> None
     plot_env_latent_map(agent, out / name, title=f"{spec.method} seed {spec.seed}")
 
 
+def training_outcome(record: dict[str, Any]) -> str:
+    """Where a run's training stopped, briefly; empty for a run that trained nothing.
+
+    E.g. ``"250 epochs, the cap"`` or ``"early stop at epoch 209, best 109"``.
+
+    The runs train without a progress bar (it would garble the grid's), so this is where the
+    grid says why each training stopped; the record's ``training`` has the full line.
+    """
+    training = record.get("training") or {}
+    epochs, best = training.get("epochs"), training.get("best_epoch")
+    reason = stop_reason_of(record)
+    if reason is None or epochs is None:
+        return ""
+    return {
+        "epoch_cap": f"{epochs} epochs, the cap",
+        "early_stopping": f"early stop at epoch {epochs}, best {best}",
+        "diverged": f"diverged after epoch {epochs}",
+        "callback": f"stopped by a callback at epoch {epochs}",
+    }.get(reason, f"{epochs} epochs, {reason}")
+
+
 def report_line(i: int, n: int, record: dict[str, Any]) -> str:
     spec = record["spec"]
+    outcome = training_outcome(record)
     done = "already finished" if record.get("skipped") else (
-        f"train {record['train_seconds']:.0f}s, control {record['eval_seconds']:.0f}s")
+        f"train {record['train_seconds']:.0f}s{f': {outcome};' if outcome else ','} "
+        f"control {record['eval_seconds']:.0f}s")
     return (
         f"[{i}/{n}] {spec['env_id']} {spec['method']} noise={spec['noise_std']} "
         f"seed={spec['seed']}: {record['mean']:.1f}% of steps in goal ({done})"

@@ -78,13 +78,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     seconds = time.perf_counter() - start
     output = args.output or default_output(agent.env_id, args.method, args.seed)
     agent.save(output)
-    summary = agent.train_summary()
-    loss = summary.get("best_validation_loss")
-    print(f"Trained {args.method} on {agent.env_id} in {seconds:.0f} s: "
-          f"{summary.get('epochs')} epochs, best validation loss "
-          f"{'-' if loss is None else f'{loss:.3g}'} at epoch {summary.get('best_epoch')}"
-          + (f" ({summary['message'].rstrip('.')})" if summary.get("message") else "")
-          + ".")
+    # The progress bar already printed why training stopped; without it, say it here.
+    message = agent.train_summary().get("message", "")
+    print(f"Trained {args.method} on {agent.env_id} in {seconds:.0f} s"
+          + (f": {message}." if args.no_progress and message else "."))
     print(f"Saved {output}\nEvaluate it: pcc evaluate {output}")
     return 0
 

@@ -46,10 +46,10 @@ def planar_like(n: int, seed: int = 0):
     return render(pos), action, render(nxt)
 
 
-def _train(data, method="pcc", config=TRAIN, **kwargs):
+def _train(data, method="pcc", config=TRAIN, progress_bar=False, **kwargs):
     model = EmbeddingModel((1, SIZE, SIZE), 2, model_config_for_method(CONFIG, method), seed=0)
     result = train_embedding(model, data, config, method=method, device="cpu",
-                             progress_bar=False, **kwargs)
+                             progress_bar=progress_bar, **kwargs)
     return model, result
 
 
@@ -147,8 +147,8 @@ def test_corrupt_and_mismatched_checkpoints_raise(tmp_path):
 def test_divergence_stops_and_restores_last_good_weights():
     config = dataclasses.replace(TRAIN, epochs=3, divergence_factor=1e-3)
     model, result = _train(planar_like(96), config=config)
-    assert result.diverged and result.epochs == 1
-    assert "diverged" in result.message
+    assert result.diverged and result.epochs == 1 and result.stop_reason == "diverged"
+    assert result.message.startswith("stopped at epoch 1 of 3: training diverged in epoch 2")
     assert all(torch.isfinite(p).all() for p in model.parameters())
 
 
@@ -218,9 +218,83 @@ def test_epoch_callback_receives_metrics_and_can_stop():
     _, result = _train(planar_like(96), epoch_callback=callback)
     assert result.epochs == 2 and [e for e, _ in seen] == [1, 2]
     assert {"loss", "prediction", "curvature", "val_loss", "epoch_seconds"} <= set(seen[0][1])
-    assert "callback" in result.message
+    assert "callback" in result.message and result.stop_reason == "callback"
     summary = result.summary()
     assert json.loads(json.dumps(summary))["epochs"] == 2 and "history" not in summary
+
+
+class RecordingBar:
+    """A stand-in for tqdm that keeps what the trainer showed."""
+
+    bars: list["RecordingBar"] = []
+
+    def __init__(self, total=None, initial=0, unit="it", **kwargs):
+        self.total, self.n, self.unit = total, initial, unit
+        self.steps: list[int] = []
+        self.postfixes: list[dict] = []
+        self.closed = False
+        RecordingBar.bars.append(self)
+
+    def update(self, n=1):
+        self.steps.append(n)
+        self.n += n
+
+    def set_postfix(self, ordered_dict=None, refresh=True, **kwargs):
+        self.postfixes.append(dict(ordered_dict or {}, **kwargs))
+
+    def close(self):
+        self.closed = True
+
+
+@pytest.fixture
+def recording_bar(monkeypatch):
+    import tqdm.auto
+
+    RecordingBar.bars = []
+    monkeypatch.setattr(tqdm.auto, "tqdm", RecordingBar)
+    return RecordingBar.bars
+
+
+def test_progress_bar_counts_whole_epochs_and_prints_why_it_stopped(recording_bar, capsys):
+    _, result = _train(planar_like(96), progress_bar=True)
+    (bar,) = recording_bar
+    assert bar.unit == "epoch" and bar.total == TRAIN.epochs and bar.closed
+    assert bar.steps == [1, 1, 1] and bar.n == result.epochs == 3  # one step per epoch
+    last = bar.postfixes[-1]
+    assert set(last) == {"loss", "val", "best"}
+    assert float(last["val"]) == pytest.approx(result.history[-1]["val/loss"], rel=1e-3)
+    assert last["best"] == f"{result.best_validation_loss:.4g}@{result.best_epoch}"
+    assert result.stop_reason == "epoch_cap" and result.summary()["stop_reason"] == "epoch_cap"
+    printed = capsys.readouterr().out.splitlines()
+    assert printed == [result.message]  # one line, under the bar
+    assert result.message.startswith("stopped at epoch 3 of 3: reached the epoch cap (best ")
+
+
+def test_early_stop_says_why_and_where(recording_bar, capsys):
+    # lr = 0: the validation loss never improves after epoch 1; patience 1 stops at epoch 2.
+    config = dataclasses.replace(TRAIN, epochs=8, lr=0.0, patience=1)
+    _, result = _train(planar_like(96), config=config, progress_bar=True)
+    assert result.stop_reason == "early_stopping" and result.converged
+    assert recording_bar[0].n == result.epochs == 2 and recording_bar[0].total == 8
+    best = f"{result.best_validation_loss:.4g}"
+    assert result.message == (
+        f"stopped at epoch 2 of 8: no validation improvement for 1 epochs (best {best} at "
+        "epoch 1); restored the best weights")
+    assert capsys.readouterr().out.splitlines() == [result.message]
+
+
+def test_no_bar_prints_nothing_and_an_interrupt_is_said_under_the_bar(recording_bar, capsys):
+    _, quiet = _train(planar_like(96))
+    assert not recording_bar and capsys.readouterr().out == ""
+    assert quiet.stop_reason == "epoch_cap"
+
+    def interrupt(epoch, metrics):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        _train(planar_like(96), progress_bar=True, epoch_callback=interrupt)
+    printed = capsys.readouterr().out.splitlines()
+    assert len(printed) == 1 and printed[0].startswith("interrupted at epoch 1 of 3 (best ")
 
 
 @pytest.mark.parametrize("min_epochs, expected", [(0, 2), (5, 5)])

@@ -16,7 +16,7 @@ from pcc_agent.planning import PLANNER_REVISION
 from pcc_bench.aggregation import aggregate, interquartile_mean
 from pcc_bench.costs import estimate_cost
 from pcc_bench.records import RunSpec, load_finished_run
-from pcc_bench.runs import execute_run
+from pcc_bench.runs import execute_run, report_line
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -73,6 +73,9 @@ def test_finished_run_is_skipped_and_partial_run_redone(tmp_path):
     assert record["status"] == "done" and path.exists()
     assert len(record["percentages"]) == 1 and len(record["tasks"][0]["states"]) > 0
     assert record["machine"]["torch_cpu_capability"]  # which kernels made the numbers
+    assert record["training"]["stop_reason"] == "epoch_cap"  # max_epochs=1
+    assert "(train " in report_line(1, 1, record) and ": 1 epochs, the cap; control " in (
+        report_line(1, 1, record))
     again = execute_run(spec, tmp_path, str(tmp_path / "data"))
     assert again.get("skipped") is True
     # A run killed mid-way leaves at most a truncated or unfinished file: it is redone.
@@ -360,10 +363,13 @@ def test_cost_estimate_uses_finished_runs_of_the_same_kind():
     nothing_known = estimate_cost([pcc])
     assert nothing_known.runs_from_records == 0
     assert nothing_known.expected_seconds == nothing_known.upper_seconds > 0
-    # pcc: median of its own kind (31 s); rce: its own record; e2c: median over all methods.
+    # pcc: mean of its own kind; rce: its own record; e2c: mean over all methods.
     cost = estimate_cost([pcc, rce, e2c], finished)
     assert cost.runs_from_records == 3
-    assert np.isclose(cost.expected_seconds, 31.0 + 4.0 + np.median([11, 31, 1001, 4]))
+    assert np.allclose(cost.run_seconds, [np.mean([11, 31, 1001]), 4.0,
+                                          np.mean([11, 31, 1001, 4])])
+    assert np.isclose(cost.expected_seconds, sum(cost.run_seconds))
+    assert cost.bases == ("same kind", "same kind", "other methods")
     caps = [estimate_cost([spec]).upper_seconds for spec in (pcc, rce, e2c)]
     # The bound is the cap, or the slowest finished run of the kind where that took longer
     # (the 1,001 s pcc run): never below the estimate.
@@ -647,7 +653,7 @@ def test_noise_variance_names_the_same_runs_as_the_presets_table3_levels(tmp_pat
     plain = status()
     assert "noise=1.4142135623730951 seed=0" in plain
     # --status also says what the rest of the grid costs, and starts nothing.
-    assert "2 runs, 2 to run, estimated" in plain
+    assert "2 runs, 2 to run: estimated" in plain
     assert not (tmp_path / "runs").exists()
     assert "noise=1.4142135623730951 seed=0" in status("--noise-variance", "2")
     assert "noise=2.0 seed=0" in status("--noise", "2")
@@ -754,3 +760,95 @@ def test_no_action_run_scores_the_starts_inside_the_goal_and_is_skipped_once_don
     noisy = markdown_table([{**pcc, "noise_std": 2.0**0.5}])
     assert "| noise variance |" in noisy and "| pcc | 2 |" in noisy
     assert f"| - | {pcc['floor_mean']:.1f} |" in table
+
+
+def test_stop_reason_of_old_records_is_inferred_and_new_ones_are_read():
+    from pcc_bench.records import stop_reason_of
+
+    assert stop_reason_of({"spec": {"method": "oracle"}}) is None  # trained nothing
+    old = {"epochs": 209, "converged": True, "diverged": False,
+           "message": "Early stopping: no validation improvement for 100 epochs."}
+    assert stop_reason_of({"training": old}) == "early_stopping"
+    capped = {**old, "converged": False, "message": "Reached the maximum of 250 epochs."}
+    assert stop_reason_of({"training": capped}) == "epoch_cap"
+    assert stop_reason_of({"training": {**capped, "diverged": True}}) == "diverged"
+    assert stop_reason_of({"training": {**capped, "stop_reason": "callback"}}) == "callback"
+    # The committed quick records predate the field; the grid's line still says why.
+    quick = ROOT / "results" / "quick" / "runs"
+    if not quick.exists():
+        pytest.skip("no committed results (not a source checkout)")
+    lines = sorted(report_line(1, 1, json.loads(p.read_text())) for p in quick.rglob("*.json")
+                   if "/pcc/" in p.as_posix())
+    assert sum(": 250 epochs, the cap;" in line for line in lines) == 2
+    assert sum(": early stop at epoch 209, best 109;" in line for line in lines) == 1
+
+
+def test_wall_time_places_the_runs_in_order_on_the_first_free_worker():
+    from pcc_bench.costs import format_duration, makespan
+
+    # The quick grid's shape: oracle, floor, then three models on two workers.
+    assert makespan([6.0, 0.1, 300.0, 300.0, 200.0], 2) == pytest.approx(500.1)
+    assert makespan([6.0, 0.1, 300.0, 300.0, 200.0], 1) == pytest.approx(806.1)
+    assert makespan([5.0], 8) == 5.0 and makespan([], 2) == 0.0
+    assert format_duration(564) == "9.4 min" and format_duration(5.5 * 3600) == "5.5 h"
+
+
+def _timed_record(spec, train_seconds, epochs, machine, eval_seconds=2.0):
+    return {"spec": dataclasses.asdict(spec), "train_seconds": train_seconds,
+            "eval_seconds": eval_seconds, "training": {"epochs": epochs}, "machine": machine}
+
+
+def test_cost_estimate_prefers_this_machine_and_scales_epochs_for_another_cap():
+    here = {"cpu": "Fast CPU", "cpu_count": 2}
+    elsewhere = {"cpu": "Slow CPU", "cpu_count": 2}
+    spec = dataclasses.replace(tiny_spec(0), max_epochs=250, patience=100, num_tasks=10)
+    # Three runs on this machine at 1 s/epoch (one stopped early at 200), three elsewhere at 4.
+    finished = [_timed_record(spec, 250.0, 250, here), _timed_record(spec, 250.0, 250, here),
+                _timed_record(spec, 200.0, 200, here)]
+    finished += [_timed_record(spec, 4 * 250.0, 250, elsewhere) for _ in range(3)]
+    cost = estimate_cost([spec], finished, machine=here)
+    assert cost.bases == ("same kind, this machine",)
+    assert cost.run_seconds[0] == pytest.approx(np.mean([252, 252, 202]))
+    assert cost.run_upper_seconds[0] == pytest.approx(1.0 * 250 + 2.0)  # to the cap
+    assert estimate_cost([spec], finished, machine=elsewhere).run_seconds[0] == (
+        pytest.approx(1002.0))
+    # Another epoch cap, same model: seconds per epoch times the epochs the runs would train.
+    # Cap 300: the capped runs would have gone on (300), the early stop stays at 200.
+    longer = dataclasses.replace(spec, max_epochs=300)
+    cost = estimate_cost([longer], finished, machine=here)
+    assert cost.bases == ("same model, this machine",)
+    speed = np.mean([250 / 250, 250 / 250, 200 / 200])
+    assert cost.run_seconds[0] == pytest.approx(speed * np.mean([300, 300, 200]) + 2.0)
+    # Cap 100: every run trains to it.
+    shorter = dataclasses.replace(spec, max_epochs=100)
+    assert estimate_cost([shorter], finished, machine=here).run_seconds[0] == (
+        pytest.approx(speed * 100 + 2.0))
+
+
+def test_status_of_the_quick_preset_comes_from_its_committed_runs(tmp_path, capsys):
+    """The quick grid took 9 min 24 s (results/quick/COMMAND); --status must say about that."""
+    from pcc_bench.costs import load_timing_records, timing_directories
+    from pcc_bench.grid import expand_grid
+    from pcc_bench.paths import COMMITTED_RESULTS_DIR
+    from pcc_bench.presets import REPRODUCE_PRESETS
+    from pcc_bench.reproduce import main
+
+    quick = COMMITTED_RESULTS_DIR / "quick"
+    if not (quick / "runs").is_dir():
+        pytest.skip("no committed results (not a source checkout)")
+    measured = 9 * 60 + 24
+    runs = expand_grid(REPRODUCE_PRESETS["quick"])
+    records = load_timing_records(timing_directories(tmp_path))
+    machine = json.loads(next((quick / "runs").rglob("seed0.json")).read_text())["machine"]
+    for here in (machine, None):  # on the machine that ran it, and on an unknown one
+        cost = estimate_cost(runs, records, here)
+        assert cost.runs_from_records == len(runs) == 5
+        assert measured / 1.5 < cost.wall_seconds(2) < measured * 1.5
+        assert cost.upper_wall_seconds(2) >= cost.wall_seconds(2)
+    assert main(["--status", "--results-dir", str(tmp_path), "--workers", "2"]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("Preset 'quick'"))
+    minutes = float(line.split("estimated ")[1].split(" min")[0])
+    assert measured / 1.5 < 60 * minutes < measured * 1.5
+    assert "Based on: 5 runs from the mean time of finished runs of the same kind" in out
+    assert "results/quick" in out
