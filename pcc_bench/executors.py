@@ -156,9 +156,20 @@ class LokyExecutor(Executor):
 ProcessExecutor = LokyExecutor
 
 
-def _ray_call(run: Callable[..., dict[str, Any]], spec: Any, *args: Any) -> dict[str, Any]:
+def _ray_call(run: Callable[..., dict[str, Any]], argv: list[str], spec: Any,
+              *args: Any) -> dict[str, Any]:
+    """``run(spec, *args)`` in a Ray worker, which sees the driver's command line ``argv``.
+
+    A record names the command that made it (``sys.argv``): the driver's, as in a local
+    worker, not the Ray worker's own.
+    """
     worker_init()
-    return run(spec, *args)
+    worker_argv = sys.argv
+    sys.argv = list(argv)
+    try:
+        return run(spec, *args)
+    finally:
+        sys.argv = worker_argv
 
 
 class RayExecutor(Executor):
@@ -194,7 +205,7 @@ class RayExecutor(Executor):
                 "num_cpus": self.num_cpus}
             ray.init(address=self.address, **local)
         task = ray.remote(num_cpus=1, num_gpus=self.gpus_per_task)(_ray_call)
-        pending = {task.remote(run, spec, *args): spec for spec in todo}
+        pending = {task.remote(run, sys.argv, spec, *args): spec for spec in todo}
         try:
             while pending:
                 (ref,), _ = ray.wait(list(pending), num_returns=1)
