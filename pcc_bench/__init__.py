@@ -4,7 +4,7 @@ Shared parts, one responsibility each:
 
 * :mod:`pcc_bench.records`: what a run is, where its record lives, when a record counts;
 * :mod:`pcc_bench.runs`: execute one run (train, control tasks, record);
-* :mod:`pcc_bench.executors`: where runs execute (serial, local process pool, Ray);
+* :mod:`pcc_bench.executors`: where runs execute (serial, loky worker processes, Ray);
 * :mod:`pcc_bench.grid`: the runs of a preset, and running the unfinished ones;
 * :mod:`pcc_bench.aggregation`: summary statistics over run records;
 * :mod:`pcc_bench.tables`, :mod:`pcc_bench.plots`: the summary as tables and figures;

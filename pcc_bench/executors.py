@@ -2,24 +2,27 @@
 
 An :class:`Executor` calls ``run(spec, *args)`` for every spec and yields ``(spec, record or
 error)`` in completion order; a failed run is an outcome, not an exception, so one failure
-never stops the others. :class:`SerialExecutor` runs in this process; :class:`ProcessExecutor`
-in a local pool of worker processes (one core each, ended with the driver at Ctrl-C or
-``kill -9``); :class:`RayExecutor` as Ray tasks on a local or remote Ray cluster (``pip
-install 'pcc-control[ray]'``). Stopping the iteration early (Ctrl-C, ``close()``) cancels
-the queued runs on every backend.
+never stops the others. :class:`SerialExecutor` runs in this process; :class:`LokyExecutor`
+on this machine, in a `loky <https://loky.readthedocs.io>`_ pool of worker processes (one
+core each, ended with the driver at Ctrl-C or ``kill -9``): the default of ``pcc reproduce``
+for more than one worker; :class:`RayExecutor` as Ray tasks on a Ray cluster, for many
+machines or GPUs (``pip install 'pcc-control[ray]'``). Stopping the iteration early (Ctrl-C,
+``close()``) cancels the queued runs on every backend. A run's record does not depend on the
+backend: each run seeds itself from its spec and uses one torch thread on every backend.
 """
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import signal
 import sys
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import InvalidStateError, ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from typing import Any
+
+import loky
 
 from pcc_bench.worker_lifetime import end_with_driver
 
@@ -37,15 +40,15 @@ def worker_init() -> None:
 
 def _pool_worker_init(parent_ignores_sigint: bool = False, driver_pid: int | None = None,
                       forked_by_main_thread: bool = False) -> None:
-    """A pool worker ends at Ctrl-C (the terminal signals the whole process group).
+    """Set up a loky worker: it ends at Ctrl-C and with its driver, and uses one thread.
 
-    Python's default would raise KeyboardInterrupt inside the run, which the pool reports as
-    that run's result before the worker takes the next queued run. The run's training
-    checkpoint is kept, so re-running the grid continues it. A grid started in the background
-    by a non-interactive shell ignores SIGINT; its workers then ignore it too, so a stray
-    SIGINT cannot kill them under a main process that keeps going. A worker also ends when
-    the driver ``driver_pid`` ends without stopping it (``kill -9``): see
-    :func:`pcc_bench.worker_lifetime.end_with_driver`.
+    Ctrl-C (the terminal signals the whole process group) ends the worker at once: Python's
+    default would raise KeyboardInterrupt inside the run, which would come back as that run's
+    result. The run's training checkpoint is kept, so re-running the grid continues it. A grid
+    started in the background by a non-interactive shell ignores SIGINT; its workers then
+    ignore it too, so a stray SIGINT cannot kill them under a main process that keeps going.
+    A worker also ends when the driver ``driver_pid`` ends without stopping it (``kill -9``):
+    see :func:`pcc_bench.worker_lifetime.end_with_driver`.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN if parent_ignores_sigint else signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the main process's graceful handler
@@ -59,36 +62,26 @@ def interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
-def _ignore_cancelled_future_race(args: threading.ExceptHookArgs) -> None:
-    """Thread excepthook: drop the executor manager's error on futures we cancelled.
-
-    At Ctrl-C the workers die with the whole process group while the main process cancels the
-    queued futures; Python 3.11's pool manager then tries to mark those cancelled futures as
-    failed and prints an ``InvalidStateError`` traceback after the clean exit message (Python
-    3.12 ignores that case itself). Every other thread error goes to the default hook.
-    """
-    manager = type(args.thread).__name__ == "_ExecutorManagerThread"
-    if not (manager and isinstance(args.exc_value, InvalidStateError)):
-        threading.__excepthook__(args)
-
-
 def pool_outcomes(
     run: Any, todo: Sequence[Any], workers: int, *args: Any
 ) -> Iterator[Outcome]:
-    """``run(spec, *args)`` for every spec in a pool of ``workers`` processes.
+    """``run(spec, *args)`` for every spec in a loky pool of ``workers`` processes.
 
-    If the consumer stops early (Ctrl-C, an error, ``close()``), the queued runs are
-    cancelled instead of being trained silently before the program exits. If this process is
+    The workers are fresh interpreters (loky starts them by fork and exec, so no lock or
+    thread of this process is copied into them); each outcome comes back as soon as its run
+    ends. If the consumer stops early (Ctrl-C, an error, ``close()``), the queued runs are
+    cancelled and the runs in progress end (their last epoch checkpoint is kept) before this
+    returns, instead of being trained silently before the program exits. If this process is
     killed outright (``kill -9``), the workers end with it.
     """
     parent_ignores_sigint = signal.getsignal(signal.SIGINT) is signal.SIG_IGN
-    # The workers are created by the submits below, in this same thread.
+    # loky starts the workers at the first submit below, in this same thread (one it starts
+    # later in place of a lost worker comes from its manager thread, which outlives them).
     main_thread = threading.current_thread() is threading.main_thread()
-    pool = ProcessPoolExecutor(
+    pool = loky.ProcessPoolExecutor(
         max_workers=workers, initializer=_pool_worker_init,
         initargs=(parent_ignores_sigint, os.getpid(), main_thread),
     )
-    futures: dict[Any, Any] = {}
     try:
         futures = {pool.submit(run, spec, *args): spec for spec in todo}
         for future in as_completed(futures):
@@ -98,17 +91,11 @@ def pool_outcomes(
                 outcome = error
             yield futures[future], outcome
     except BaseException:
-        # Cancel each queued future here: the pool's own cancel_futures can miss them when
-        # the executor object is collected before its manager thread acts on the flag.
-        threading.excepthook = _ignore_cancelled_future_race
-        for future in futures:
-            future.cancel()
-        pool.shutdown(wait=False, cancel_futures=True)
-        # Runs in progress stop too (their last epoch checkpoint is kept), also when the signal
-        # reached only this process (SIGTERM, or SIGINT sent to one pid). The grid's pool
-        # workers are the only child processes the driver starts.
-        for worker in multiprocessing.active_children():
-            worker.terminate()
+        # kill_workers: the queued runs fail with ShutdownExecutorError (nobody reads them)
+        # and the workers are killed, also when the signal reached only this process
+        # (SIGTERM, or SIGINT sent to one pid). The futures are not cancelled here: loky's
+        # manager thread fails on a future that was cancelled behind its back.
+        pool.shutdown(wait=True, kill_workers=True)
         print("Stopped: queued runs cancelled.", file=sys.stderr, flush=True)
         raise
     pool.shutdown()
@@ -145,8 +132,13 @@ class SerialExecutor(Executor):
                 yield spec, error
 
 
-class ProcessExecutor(Executor):
-    """A local pool of ``workers`` processes, one core each (see :func:`pool_outcomes`)."""
+class LokyExecutor(Executor):
+    """A local loky pool of ``workers`` processes, one core each (see :func:`pool_outcomes`).
+
+    The workers end with the driver, however it ends: at Ctrl-C or SIGTERM the runs in
+    progress are stopped and the queued ones cancelled; at ``kill -9`` each worker's
+    parent-death guard (:func:`pcc_bench.worker_lifetime.end_with_driver`) ends it.
+    """
 
     def __init__(self, workers: int) -> None:
         if workers < 1:
@@ -160,13 +152,28 @@ class ProcessExecutor(Executor):
         return pool_outcomes(run, todo, self.workers, *args)
 
 
-def _ray_call(run: Callable[..., dict[str, Any]], spec: Any, *args: Any) -> dict[str, Any]:
+#: The earlier name of :class:`LokyExecutor` (the local process pool), kept for callers.
+ProcessExecutor = LokyExecutor
+
+
+def _ray_call(run: Callable[..., dict[str, Any]], argv: list[str], spec: Any,
+              *args: Any) -> dict[str, Any]:
+    """``run(spec, *args)`` in a Ray worker, which sees the driver's command line ``argv``.
+
+    A record names the command that made it (``sys.argv``): the driver's, as in a local
+    worker, not the Ray worker's own.
+    """
     worker_init()
-    return run(spec, *args)
+    worker_argv = sys.argv
+    sys.argv = list(argv)
+    try:
+        return run(spec, *args)
+    finally:
+        sys.argv = worker_argv
 
 
 class RayExecutor(Executor):
-    """The runs as Ray tasks: one CPU and ``gpus_per_task`` GPUs each.
+    """The runs as Ray tasks, for a cluster: one CPU and ``gpus_per_task`` GPUs each.
 
     Args:
         address: The cluster (``"auto"``, ``"ray://host:10001"``); None starts or joins a
@@ -198,7 +205,7 @@ class RayExecutor(Executor):
                 "num_cpus": self.num_cpus}
             ray.init(address=self.address, **local)
         task = ray.remote(num_cpus=1, num_gpus=self.gpus_per_task)(_ray_call)
-        pending = {task.remote(run, spec, *args): spec for spec in todo}
+        pending = {task.remote(run, sys.argv, spec, *args): spec for spec in todo}
         try:
             while pending:
                 (ref,), _ = ray.wait(list(pending), num_returns=1)
@@ -216,9 +223,14 @@ class RayExecutor(Executor):
 
 def make_executor(backend: str = "process", workers: int = 1, ray_address: str | None = None,
                   ray_gpus_per_task: float = 0.0) -> Executor:
-    """The executor of a backend name: ``"process"`` (serial for one worker) or ``"ray"``."""
+    """The executor of a backend name.
+
+    ``"process"``: this machine, a :class:`LokyExecutor` of ``workers`` processes (a
+    :class:`SerialExecutor` for one worker); ``"ray"``: a :class:`RayExecutor` at
+    ``ray_address``.
+    """
     if backend == "ray":
         return RayExecutor(ray_address, ray_gpus_per_task)
     if backend != "process":
         raise ValueError(f"unknown backend {backend!r}: use 'process' or 'ray'")
-    return SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
+    return SerialExecutor() if workers <= 1 else LokyExecutor(workers)

@@ -81,10 +81,11 @@ def run_grid(
     """Execute the runs that are not finished yet, on ``executor``.
 
     Without ``executor``, :func:`~pcc_bench.executors.make_executor` picks one from
-    ``backend`` (``"process"``: a local pool of ``workers`` processes, serial for one worker;
-    ``"ray"``: Ray tasks at ``ray_address`` with ``ray_gpus_per_task`` GPUs each). A failed
-    run does not stop the others; the failures are raised together at the end. Ctrl-C
-    cancels the queued runs (finished ones are kept: re-running continues the grid).
+    ``backend`` (``"process"``: ``workers`` loky worker processes on this machine, serial for
+    one worker; ``"ray"``: Ray tasks at ``ray_address`` with ``ray_gpus_per_task`` GPUs each,
+    for a cluster). A failed run does not stop the others; the failures are raised together
+    at the end. Ctrl-C cancels the queued runs (finished ones are kept: re-running continues
+    the grid).
     """
     todo = [r for r in runs if load_finished_run(results_dir / r.relative_path, r) is None]
     print(f"{len(runs) - len(todo)} of {len(runs)} runs already finished; {len(todo)} to run.")

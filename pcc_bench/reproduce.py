@@ -161,9 +161,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--workers",
         type=positive_int,
         default=os.cpu_count() or 1,
-        help="Parallel runs (one core each) for the process backend.",
+        help="Parallel runs on this machine for the process backend (loky worker processes, "
+        "one core each; 1: one after another in this process).",
     )
-    parser.add_argument("--backend", choices=("process", "ray"), default="process")
+    parser.add_argument("--backend", choices=("process", "ray"), default="process",
+                        help="process: this machine (see --workers); ray: Ray tasks on a Ray "
+                        "cluster (pip install 'pcc-control[ray]').")
     parser.add_argument("--ray-address", default=None, help="Ray cluster address (e.g. 'auto').")
     parser.add_argument(
         "--ray-gpus-per-task", type=non_negative_float, default=0.0,

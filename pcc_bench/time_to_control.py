@@ -199,7 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--workers", type=int, default=2,
                         help="models trained at once, one CPU thread each")
     parser.add_argument("--backend", choices=("process", "ray"), default="process",
-                        help="local worker processes, or Ray tasks on a Ray cluster")
+                        help="local loky worker processes, or Ray tasks on a Ray cluster")
     parser.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR)
     parser.add_argument("--out", type=Path, default=None,
                         help="summary JSON (default: RESULTS_DIR/time_to_control.json)")

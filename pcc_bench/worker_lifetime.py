@@ -1,8 +1,9 @@
 """Pool workers that end with the process that started them, however it ends.
 
-``kill -9`` (or the OOM killer) ends a grid's driver without running any handler: its
-``ProcessPoolExecutor`` workers would go on computing runs nobody collects, keeping the CPUs
-busy for hours. A worker calls :func:`end_with_driver` from the pool's initializer.
+``kill -9`` (or the OOM killer) ends a grid's driver without running any handler: its loky
+workers would go on computing runs nobody collects, keeping the CPUs busy for hours, and then
+wait for more work forever (loky does not end them: they are re-parented and block on their
+call queue). A worker calls :func:`end_with_driver` from the pool's initializer.
 """
 
 from __future__ import annotations

@@ -471,10 +471,24 @@ def _is_running(pid: int) -> bool:
         return False
 
 
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    children = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and int(
+                    (entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                children.append(int(entry.name))
+        except (OSError, IndexError, ValueError):  # ended meanwhile
+            continue
+    return children
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_killed_driver_leaves_no_worker_running(tmp_path):
     """kill -9 of the driver (no handler runs): its pool workers end too, at once, instead of
-    finishing their runs (here a minute each) with nobody left to collect the results."""
+    finishing their runs (here a minute each) with nobody left to collect the results; so do
+    the pool's helper processes (loky's resource trackers)."""
     import signal
     import time
 
@@ -487,7 +501,8 @@ def test_killed_driver_leaves_no_worker_running(tmp_path):
         time.sleep(0.01)
     workers = [int(path.read_text()) for path in markers.iterdir()]
     assert len(set(workers)) == 2 and all(map(_is_running, workers))
-    alive = workers
+    helpers = [pid for pid in _children(child.pid) if pid not in workers]
+    alive = workers + helpers
     try:
         os.kill(child.pid, signal.SIGKILL)
         child.wait(timeout=30)
@@ -495,7 +510,8 @@ def test_killed_driver_leaves_no_worker_running(tmp_path):
         while alive and time.monotonic() < deadline:
             time.sleep(0.05)
             alive = [pid for pid in alive if _is_running(pid)]
-        assert not alive, f"pool workers {alive} outlived their killed driver"
+        assert not alive, (f"processes {alive} of workers {workers} and helpers {helpers} "
+                           "outlived their killed driver")
     finally:
         for pid in alive:  # do not leave them sleeping on the machine when the test fails
             os.kill(pid, signal.SIGKILL)
