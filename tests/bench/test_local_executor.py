@@ -28,13 +28,16 @@ def _run_and_say_where(spec: Any, results_dir: Path, data_dir: str) -> dict[str,
 
 
 def _computed(record: dict[str, Any]) -> str:
-    """What a run computed: its record as JSON without the wall-clock fields (seconds, times)
-    and the test's ``where`` (JSON: a tuple and the list it is written as compare equal)."""
+    """What a run computed: its record as JSON without the wall-clock fields (seconds, times),
+    the test's ``where`` (JSON: a tuple and the list it is written as compare equal) and the
+    weights file's digest (the file's metadata holds the training's wall time; the weights
+    are compared by the evaluation they give)."""
 
     def drop_timings(value: Any) -> Any:
         if isinstance(value, dict):
             return {key: drop_timings(item) for key, item in value.items()
-                    if "seconds" not in key and "time" not in key and key != "where"}
+                    if "seconds" not in key and "time" not in key
+                    and key not in ("where", "sha256")}
         if isinstance(value, (list, tuple)):
             return [drop_timings(item) for item in value]
         return value
