@@ -110,6 +110,8 @@ class PCCAgent:
         self.data_cache_dir = data_cache_dir
         self.num_timesteps = 0
         self.train_result: TrainResult | None = None
+        #: Loaded from a control-only file: it plans, but cannot train, decode or be saved whole.
+        self.control_only = False
         self._logger: Logger | None = None
         if env is None:
             raise ValueError("PCCAgent needs an environment (a gymnasium env or a registered id).")
@@ -318,6 +320,11 @@ class PCCAgent:
         Returns:
             self.
         """
+        if self.control_only:
+            raise RuntimeError(
+                "This agent was loaded from a control-only file (encoder and latent dynamics "
+                "only): it plans but cannot train. Train from a full checkpoint, or a new agent."
+            )
         sb3_callback = as_sb3_callback(callback)  # refuse a wrong one before any work
         if dataset is not None:
             if isinstance(dataset, tuple):
@@ -517,7 +524,8 @@ class PCCAgent:
             return {}
         return self.train_result.summary()
 
-    def save(self, path: str | os.PathLike[str], half: bool = False) -> None:
+    def save(self, path: str | os.PathLike[str], half: bool = False,
+             control_only: bool = False) -> None:
         """Save weights, configuration, goal and versions to one file (atomic, safe to load).
 
         Args:
@@ -526,7 +534,19 @@ class PCCAgent:
             half: Store the weights as float16 (``.safetensors`` only): half the size; the
                 loaded agent computes with the rounded weights, so evaluate the loaded agent
                 to know its score.
+            control_only: Store only the encoder and the latent dynamics (``.safetensors``
+                only): what :meth:`predict` uses, so the loaded agent plans exactly the same,
+                in a file a third the size or less; it cannot be trained further.
+
+        Raises:
+            ValueError: A whole save of an agent loaded from a control-only file (its other
+                weights were never loaded), or ``half`` / ``control_only`` with a ``.pt`` path.
         """
+        if self.control_only and not control_only:
+            raise ValueError(
+                "This agent was loaded from a control-only file: save it with "
+                "control_only=True (its decoder and backward model were never loaded)."
+            )
         path = Path(path)
         if path.suffix == "":
             path = path.with_suffix(".pt")
@@ -536,7 +556,8 @@ class PCCAgent:
             "goal_obs": None if self._goal_obs is None else self._goal_obs.tolist(),
             "train_summary": self.train_summary(),
         }
-        save_checkpoint(path, self.model, self.config_dict(), extra, half=half)
+        save_checkpoint(path, self.model, self.config_dict(), extra, half=half,
+                        control_only=control_only)
 
     @classmethod
     def load(
@@ -595,6 +616,7 @@ class PCCAgent:
             )
             agent._actions = ActionScaler(agent._actions.low, agent._actions.high, enabled=False)
         load_weights(agent.model, checkpoint)
+        agent.control_only = checkpoint.control_only
         agent.model.to(agent.device)
         goal = checkpoint.extra.get("goal_obs")
         if goal is not None:

@@ -8,7 +8,9 @@ A checkpoint is one file, in one of two formats:
   (tensors and a JSON header, nothing executable by construction), optionally with the weights
   stored in float16 to halve the file (the pretrained models shipped with the package and the
   weights behind committed benchmark rows). Loading casts them back to float32; no training
-  state is stored.
+  state is stored. A *control-only* file keeps just the encoder and the latent dynamics
+  (:data:`CONTROL_PARTS`), all that planning needs: a third or less of the file, the same
+  actions; the model loaded from it cannot be trained further or decode.
 
 It holds:
 
@@ -49,6 +51,10 @@ __all__ = [
 #: File suffix of the safetensors format; every other suffix is written with ``torch.save``.
 SAFETENSORS_SUFFIX = ".safetensors"
 
+#: The modules latent control uses (``predict``: encode the observation and the goal, plan
+#: with the latent dynamics), by state-dict prefix; a control-only file stores only these.
+CONTROL_PARTS = ("encoder.", "dynamics.")
+
 FORMAT_NAME = "pcc_agent.checkpoint"
 FORMAT_VERSION = 1
 
@@ -68,6 +74,7 @@ class Checkpoint:
         config: The caller's configuration dict.
         extra: JSON metadata.
         state: Training state (optimizer / RNG), empty when not saved.
+        control_only: Only the :data:`CONTROL_PARTS` weights are stored.
     """
 
     path: Path
@@ -76,6 +83,7 @@ class Checkpoint:
     config: dict[str, Any]
     extra: dict[str, Any] = field(default_factory=dict)
     state: dict[str, Any] = field(default_factory=dict)
+    control_only: bool = False
 
     @property
     def model_config(self) -> ModelConfig:
@@ -103,6 +111,7 @@ def save_checkpoint(
     extra: dict[str, Any] | None = None,
     state: dict[str, Any] | None = None,
     half: bool = False,
+    control_only: bool = False,
 ) -> Path:
     """Save a model atomically to one file.
 
@@ -117,6 +126,8 @@ def save_checkpoint(
             stored in the safetensors format.
         half: Store floating-point weights as float16 (safetensors format only): half the
             size; the model loaded from it computes with the rounded weights.
+        control_only: Store only the :data:`CONTROL_PARTS` weights (safetensors format
+            only), for an agent that will plan but not train or decode.
 
     Returns:
         The path written.
@@ -132,11 +143,11 @@ def save_checkpoint(
                 f"{path}: the safetensors format stores weights only, not training state; "
                 "save training checkpoints as .pt files."
             )
-        return _save_safetensors(Path(path), model, config_dict, extra, half)
-    if half:
+        return _save_safetensors(Path(path), model, config_dict, extra, half, control_only)
+    if half or control_only:
         raise ValueError(
-            f"{path}: float16 weights are stored in the safetensors format only; give the "
-            f"file the {SAFETENSORS_SUFFIX} suffix."
+            f"{path}: float16 and control-only weights are stored in the safetensors format "
+            f"only; give the file the {SAFETENSORS_SUFFIX} suffix."
         )
     payload = {
         "format": FORMAT_NAME,
@@ -153,13 +164,15 @@ def save_checkpoint(
 
 def _save_safetensors(
     path: Path, model: EmbeddingModel, config_dict: dict[str, Any] | None,
-    extra: dict[str, Any] | None, half: bool,
+    extra: dict[str, Any] | None, half: bool, control_only: bool = False,
 ) -> Path:
     """Write the weights and the JSON fields as a safetensors file, atomically."""
     from safetensors.torch import save
 
     tensors = {}
     for name, value in model.state_dict().items():
+        if control_only and not name.startswith(CONTROL_PARTS):
+            continue
         value = value.detach().cpu()
         if half and value.is_floating_point():
             value = value.to(torch.float16)
@@ -171,6 +184,7 @@ def _save_safetensors(
         "config_json": json.dumps(config_dict or {}),
         "extra_json": json.dumps(extra or {}),
         "weights_dtype": "float16" if half else "float32",
+        "parts": "control" if control_only else "all",
     }
     atomic_write_bytes(path, save(tensors, metadata=metadata))
     return path
@@ -211,6 +225,7 @@ def _load_safetensors(path: Path, map_location: torch.device | str) -> Checkpoin
             architecture=json.loads(metadata["architecture_json"]),
             config=json.loads(metadata["config_json"]),
             extra=json.loads(metadata["extra_json"]),
+            control_only=metadata.get("parts") == "control",
         )
     except (KeyError, json.JSONDecodeError) as error:
         raise CheckpointError(f"Checkpoint {path} is missing or has damaged fields: {error}.") \
@@ -380,6 +395,8 @@ def load_weights(model: EmbeddingModel, checkpoint: Checkpoint) -> None:
             f"model expects {model.action_dim}."
         )
     own = model.state_dict()
+    if checkpoint.control_only:  # the other parts keep their initial values
+        own = {k: v for k, v in own.items() if k.startswith(CONTROL_PARTS)}
     missing = sorted(set(own) - set(checkpoint.state_dict))
     unexpected = sorted(set(checkpoint.state_dict) - set(own))
     wrong = sorted(
@@ -393,7 +410,7 @@ def load_weights(model: EmbeddingModel, checkpoint: Checkpoint) -> None:
             f"(missing={missing[:5]}, unexpected={unexpected[:5]}, wrong shapes={wrong[:5]}). "
             "Build the model from checkpoint.model_config (Checkpoint.build_model())."
         )
-    model.load_state_dict(checkpoint.state_dict)
+    model.load_state_dict(checkpoint.state_dict, strict=not checkpoint.control_only)
 
 
 def load_model(

@@ -1,7 +1,8 @@
 """Pretrained agents shipped with the package: load one and control at once.
 
-Each entry is a model of a committed benchmark row, stored as float16 safetensors weights
-inside the package (``pcc_agent/pretrained/``). Its ``percentages`` are those measured with
+Each entry is a model of a committed benchmark row, stored as float16 control-only
+safetensors weights (the encoder and the latent dynamics, all that planning uses; see
+:mod:`pcc_agent.checkpoint`) inside the package (``pcc_agent/pretrained/``). Its ``percentages`` are those measured with
 that very file on the env's 10 evaluation tasks, so evaluating it reproduces them (exactly
 on the CPU that measured them; a CPU with other vector instructions may round differently).
 
@@ -72,7 +73,7 @@ PRETRAINED: dict[str, PretrainedModel] = {
             env_id="pcc/Planar-v0",
             method="pcc",
             file="planar_pcc.safetensors",
-            sha256="6dcb6209d3f3f58c432b857ecfc3c9cbaac0176da8819b4d7812225343dde280",
+            sha256="2569ee6996292e742eeb745d1278457c7f0ddaaf2966075be78d9e8299dc47fb",
             task_seed=2020,
             percentages=(75.0,) * 10,
             source="results/quick/runs/quick/pcc_Planar-v0/noise0.0/pcc/seed0.json "

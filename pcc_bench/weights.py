@@ -1,8 +1,8 @@
 """The float16 weights behind a run record: written, loaded, and back-filled for old runs.
 
 Every trained run saves its agent twice: a float32 ``.pt`` checkpoint (not committed) and
-float16 safetensors weights (``<results-dir>/weights/...``, about 2.6 MB for a Planar
-model, small enough to commit). The record's percentages are those of the agent loaded from
+float16 control-only safetensors weights (``<results-dir>/weights/...``: the encoder and the
+latent dynamics, all that control uses; 1.2 MB for a Planar model, small enough to commit). The record's percentages are those of the agent loaded from
 the float16 file, so loading that file reproduces them exactly; the record names the file
 and its SHA-256 under ``"weights"``.
 
@@ -45,7 +45,7 @@ def sha256_of(path: Path) -> str:
 
 
 def save_half_weights(agent: Any, results_dir: str | Path, spec: RunSpec) -> tuple[Any, dict]:
-    """Save ``agent``'s float16 weights for ``spec`` and load them back.
+    """Save ``agent``'s float16 control-only weights for ``spec`` and load them back.
 
     Returns:
         ``(rounded_agent, weights_entry)``: the agent loaded from the float16 file (the one
@@ -55,9 +55,9 @@ def save_half_weights(agent: Any, results_dir: str | Path, spec: RunSpec) -> tup
     from pcc_agent.agent import PCCAgent
 
     path = weights_path(results_dir, spec)
-    agent.save(path, half=True)
+    agent.save(path, half=True, control_only=True)
     entry = {"file": path.relative_to(results_dir).as_posix(), "dtype": WEIGHTS_DTYPE,
-             "sha256": sha256_of(path)}
+             "parts": "control", "sha256": sha256_of(path)}
     return PCCAgent.load(path), entry
 
 

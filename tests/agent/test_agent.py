@@ -125,6 +125,28 @@ def test_safetensors_round_trip_float32_exact_and_float16_rounded(trained, tmp_p
     np.testing.assert_array_equal(half._goal_obs, agent._goal_obs)
 
 
+def test_control_only_file_plans_the_same_and_refuses_training(trained, tmp_path):
+    agent, _ = trained
+    obs, _ = gym.make(ENV_ID).reset(seed=5)
+    agent.set_planner()
+    expected, _ = agent.predict(obs)
+    whole, control = tmp_path / "whole.safetensors", tmp_path / "control.safetensors"
+    agent.save(whole, half=True)
+    agent.save(control, half=True, control_only=True)
+    assert control.stat().st_size < 0.7 * whole.stat().st_size
+    loaded = PCCAgent.load(control)
+    assert loaded.control_only and not PCCAgent.load(whole).control_only
+    np.testing.assert_array_equal(loaded.predict(obs)[0], PCCAgent.load(whole).predict(obs)[0])
+    np.testing.assert_allclose(loaded.predict(obs)[0], expected, atol=0.05)  # float16 rounding
+    with pytest.raises(RuntimeError, match="control-only"):
+        loaded.learn(total_timesteps=100)
+    with pytest.raises(ValueError, match="control_only=True"):
+        loaded.save(tmp_path / "again.safetensors")
+    loaded.save(tmp_path / "again.safetensors", control_only=True)
+    with pytest.raises(ValueError, match="safetensors"):
+        agent.save(tmp_path / "control.pt", control_only=True)
+
+
 def test_safetensors_refuses_damaged_files_and_impossible_requests(trained, tmp_path):
     agent, _ = trained
     path = tmp_path / "agent.safetensors"
