@@ -273,8 +273,10 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; a config saved before ``flush_denormals`` existed
-        (every run before version 0.3) trained with it off and reads so.
+        """Inverse of :meth:`to_dict`.
+
+        A config saved before ``flush_denormals`` existed (every run before version 0.3)
+        trained with it off and reads so.
         """
         values = dict(data)
         values.setdefault("flush_denormals", False)

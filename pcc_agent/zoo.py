@@ -2,9 +2,10 @@
 
 Each entry is a model of a committed benchmark row, stored as float16 control-only
 safetensors weights (the encoder and the latent dynamics, all that planning uses; see
-:mod:`pcc_agent.checkpoint`) inside the package (``pcc_agent/pretrained/``). Its ``percentages`` are those measured with
-that very file on the env's 10 evaluation tasks, so evaluating it reproduces them (exactly
-on the CPU that measured them; a CPU with other vector instructions may round differently).
+:mod:`pcc_agent.checkpoint`) inside the package (``pcc_agent/pretrained/``). Its
+``percentages`` are those measured with that very file on the env's 10 evaluation tasks,
+so evaluating it reproduces them (exactly on the CPU that measured them; a CPU with other
+vector instructions may round differently).
 
 Example:
     >>> from pcc_agent.zoo import load_pretrained

@@ -2,9 +2,10 @@
 
 Every trained run saves its agent twice: a float32 ``.pt`` checkpoint (not committed) and
 float16 control-only safetensors weights (``<results-dir>/weights/...``: the encoder and the
-latent dynamics, all that control uses; 1.2 MB for a Planar model, small enough to commit). The record's percentages are those of the agent loaded from
-the float16 file, so loading that file reproduces them exactly; the record names the file
-and its SHA-256 under ``"weights"``.
+latent dynamics, all that control uses; 1.2 MB for a Planar model, small enough to commit).
+The record's percentages are those of the agent loaded from the float16 file, so loading
+that file reproduces them exactly; the record names the file and its SHA-256 under
+``"weights"``.
 
 Records made before this existed were evaluated with float32 weights. This command exports
 their float16 weights from the float32 checkpoints, re-evaluates the rounded agents on the
