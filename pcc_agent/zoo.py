@@ -82,6 +82,20 @@ PRETRAINED: dict[str, PretrainedModel] = {
             machine="2-core Intel Xeon (AVX-512, AMX)",
             torch_cpu_capability="AVX512",
         ),
+        PretrainedModel(
+            name="pendulum-swingup-pcc",
+            env_id="pcc/PendulumSwingUp-v0",
+            method="pcc",
+            file="pendulum_swingup_pcc.safetensors",
+            sha256="f62b1fc577c1e573ab011f6d80544c335a8e65219bb15ce38cca82558ef68bcc",
+            task_seed=2020,
+            percentages=(93.75,) * 10,
+            source="results/reproduce/runs/paper+max_epochs=150,flush_denormals=True/"
+                   "pcc_PendulumSwingUp-v0/noise0.0/pcc/seed0.json (`pcc reproduce --preset "
+                   "paper --max-epochs 150 --flush-denormals`, model 0; 45 min on one core)",
+            machine="2-core Intel Xeon (AVX-512, AMX)",
+            torch_cpu_capability="AVX512",
+        ),
     )
 }
 

@@ -91,8 +91,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         shipped = PRETRAINED[str(args.model)]
         args.model = pretrained_path(shipped.name)
     import numpy as np
+    import torch
 
     from pcc_agent.agent import PCCAgent
+
+    # One thread, as the grid evaluates: the same numbers as its records, and faster for the
+    # planner's small matrices than several threads.
+    torch.set_num_threads(1)
     from pcc_agent.evaluation import evaluate_control, format_mean_se, task_seeds
     from pcc_agent.io import atomic_write_json
 
