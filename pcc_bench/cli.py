@@ -38,6 +38,8 @@ SPEED_COMMANDS: dict[str, tuple[str, str]] = {
     "env": ("pcc_bench.env_speed", "env steps and data-set samples per second"),
     "control": ("pcc_bench.time_to_control",
                 "time to control: % in goal against minutes of training"),
+    "threads": ("pcc_bench.train_threads",
+                "two one-thread trainings at once against one two-thread training"),
 }
 
 EXAMPLES = """examples:
