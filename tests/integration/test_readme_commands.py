@@ -26,6 +26,7 @@ INLINE_COMMANDS: dict[str, list[str] | str] = {
     "pcc evaluate planar-pcc --picture planar.png":
         ["evaluate", "planar-pcc", "--picture", "planar.png"],
     "pcc speed control": ["speed", "control", "--help"],  # trains for minutes: options only
+    "pcc speed threads": ["speed", "threads", "--help"],  # trains for minutes: options only
     'pip install -e ".[docs]" && mkdocs serve': "CI installs the docs extra and builds the site",
 }
 
