@@ -192,18 +192,16 @@ def _save_safetensors(
 
 def _load_safetensors(path: Path, map_location: torch.device | str) -> Checkpoint:
     """Read a safetensors checkpoint; float16 weights come back as float32."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load
+    from safetensors import SafetensorError, safe_open
 
-    data = path.read_bytes()
-    if not data:
+    if path.stat().st_size == 0:
         raise CheckpointError(f"Checkpoint {path} is empty (0 bytes): it was never written. "
                               f"{_REMEDY}")
     try:
-        tensors = load(data)
-        header_length = int.from_bytes(data[:8], "little")
-        metadata = json.loads(data[8:8 + header_length]).get("__metadata__") or {}
-    except (SafetensorError, ValueError, UnicodeDecodeError) as error:
+        with safe_open(path, framework="pt") as handle:
+            metadata = handle.metadata() or {}
+            tensors = {name: handle.get_tensor(name) for name in handle.keys()}
+    except (SafetensorError, OSError, ValueError) as error:
         raise CheckpointError(
             f"Checkpoint {path} is not a readable safetensors file ({_reason(error)}): it is "
             f"truncated or corrupt. {_REMEDY}"

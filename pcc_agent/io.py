@@ -27,6 +27,7 @@ __all__ = [
     "atomic_write_json",
     "atomic_write_text",
     "sb3_logger",
+    "sha256_of",
     "versions",
 ]
 
@@ -64,6 +65,13 @@ def atomic_write(
 def atomic_write_text(text: str, path: str | os.PathLike[str]) -> Path:
     """Write a text file atomically (UTF-8)."""
     return atomic_write(path, lambda handle: handle.write(text))
+
+
+def sha256_of(path: str | os.PathLike[str]) -> str:
+    """The SHA-256 digest of a file, hex (the digests of shipped and committed weights)."""
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:

@@ -17,7 +17,6 @@ From the shell: ``pcc evaluate planar-pcc``.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -117,7 +116,9 @@ def pretrained_path(name: str) -> Path:
             f"Pretrained agent file {path} is missing: the package was installed without its "
             "data files. Reinstall pcc-control."
         )
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    from pcc_agent.io import sha256_of
+
+    digest = sha256_of(path)
     if digest != entry.sha256:
         raise ValueError(f"Pretrained agent file {path} is damaged or was replaced (SHA-256 "
                          f"{digest}, expected {entry.sha256}). Reinstall pcc-control.")

@@ -21,12 +21,12 @@ Examples:
 from __future__ import annotations
 
 import argparse
-import hashlib
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pcc_agent.io import sha256_of
 from pcc_bench.arguments import command_parser
 from pcc_bench.records import (
     REFERENCE_METHODS,
@@ -38,11 +38,6 @@ from pcc_bench.records import (
 
 #: Floating-point type of the committed weights.
 WEIGHTS_DTYPE = "float16"
-
-
-def sha256_of(path: Path) -> str:
-    """The SHA-256 digest of a file, hex."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def save_half_weights(agent: Any, results_dir: str | Path, spec: RunSpec) -> tuple[Any, dict]:
