@@ -127,7 +127,8 @@ def collect_transitions(env: gym.Env, num_samples: int, rollout_steps: int,
             np.asarray(next_observations[:num_samples], np.uint8))
 
 
-def make_agent(env: gym.Env, seed: int, epochs: int, device: str = "auto") -> Any:
+def make_agent(env: gym.Env, seed: int, epochs: int, device: str = "auto", lr: float = 5e-4,
+               standardize: bool = False, warmup_epochs: int = 0) -> Any:
     """A ``PCCAgent`` for the pixel env: the pendulum-size preset, the swing-up planner."""
     from pcc_agent import PCCAgent
     from pcc_agent.presets import default_preset_for_spaces, get_preset
@@ -135,8 +136,10 @@ def make_agent(env: gym.Env, seed: int, epochs: int, device: str = "auto") -> An
     preset = default_preset_for_spaces(env.observation_space, env.action_space)
     # Subnormals flushed: weight decay drives the weights of never-lit pixels (most of a
     # pendulum frame) into the subnormal range, where Intel CPUs multiply many times slower.
-    train = dataclasses.replace(preset.train, epochs=epochs)  # subnormals flushed (default)
-    preset = dataclasses.replace(preset, train=train,
+    train = dataclasses.replace(preset.train, epochs=epochs, lr=lr,
+                                warmup_epochs=warmup_epochs)  # subnormals flushed (default)
+    model = dataclasses.replace(preset.model, input_standardization=standardize)
+    preset = dataclasses.replace(preset, train=train, model=model,
                                  planner=get_preset("pcc/PendulumSwingUp-v0").planner)
     return PCCAgent(env, method="pcc", preset=preset, seed=seed, device=device)
 
@@ -163,15 +166,21 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                         help="stop training after this many minutes")
     parser.add_argument("--episodes", type=int, default=5, help="control episodes")
     parser.add_argument("--steps", type=int, default=200, help="steps per control episode")
+    parser.add_argument("--size", type=int, default=48, help="image side in pixels")
+    parser.add_argument("--lr", type=float, default=5e-4, help="Adam learning rate")
+    parser.add_argument("--standardize", action="store_true",
+                        help="per-pixel input standardization")
+    parser.add_argument("--warmup-epochs", type=int, default=0, help="KL warm-up epochs")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--device", default="auto")
     parser.add_argument("--save", help="save the trained agent here")
     parser.add_argument("--out", help="write the result as JSON here")
     args = parser.parse_args(argv)
 
-    train_env = make_pixel_env(max_episode_steps=args.rollout_steps + 1)
-    eval_env = make_pixel_env(max_episode_steps=args.steps + 2)  # + the 2 steps of start_at
-    agent = make_agent(train_env, args.seed, args.epochs, args.device)
+    train_env = make_pixel_env(max_episode_steps=args.rollout_steps + 1, size=args.size)
+    eval_env = make_pixel_env(max_episode_steps=args.steps + 2, size=args.size)  # + start_at's 2
+    agent = make_agent(train_env, args.seed, args.epochs, args.device, lr=args.lr,
+                       standardize=args.standardize, warmup_epochs=args.warmup_epochs)
     agent.set_goal(goal_observation(eval_env))  # the goal from an image of the upright pole
     start = time.perf_counter()
 

@@ -24,6 +24,8 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 __all__ = [
+    "EVALUATION_TASK_SEED",
+    "VALIDATION_TASK_SEED",
     "ControlEvaluation",
     "TaskResult",
     "evaluate_control",
@@ -31,6 +33,12 @@ __all__ = [
     "standard_error",
     "task_seeds",
 ]
+
+#: Base task seed of the evaluation tasks every committed row reports (the paper's protocol).
+EVALUATION_TASK_SEED = 2020
+#: Base task seed of the validation tasks: choosing settings, trainings or checkpoints on
+#: these keeps the evaluation tasks unseen.
+VALIDATION_TASK_SEED = 2021
 
 PolicyLike = Any  # anything with SB3's ``predict(obs, state, episode_start, deterministic)``
 

@@ -2,7 +2,8 @@
 
 Per (env, method, noise, preset): mean and standard error over all tasks and for the top-1
 model, IQM with a bootstrap interval across models, the references (oracle, no action); and
-the models of the ``restarts`` presets, chosen from their trainings.
+the models of the ``restarts`` presets and of the presets with spare trainings, chosen from
+their trainings (:func:`choose_models`).
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ def aggregate(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     """Summary rows per (env, method, noise, preset) from run records.
 
     Restart trainings (:func:`is_restart_training`) are left out: pass the records of
-    :func:`select_restarts` to get the rows of the ``restarts`` presets.
+    :func:`choose_models` to get the rows of the presets that choose among trainings.
     """
     from pcc_agent.evaluation import standard_error
 
@@ -192,6 +193,76 @@ def select_restarts(
                               "mean": r["mean"]} for k, r in sorted(trainings.items())],
             })
     return selected
+
+
+def choose_models(
+    records: Sequence[dict[str, Any]],
+    presets: Iterable[ReproducePreset] = REPRODUCE_PRESETS.values(),
+) -> list[dict[str, Any]]:
+    """The records whose models make the rows: every preset's choice among its trainings.
+
+    The trainings a preset with spares did not keep are left out (:func:`kept_trainings`);
+    the models of the ``restarts`` presets are added (:func:`select_restarts`).
+    """
+    presets = list(presets)
+    return kept_trainings(records, presets) + select_restarts(records, presets)
+
+
+def kept_trainings(
+    records: Sequence[dict[str, Any]],
+    presets: Iterable[ReproducePreset] = REPRODUCE_PRESETS.values(),
+) -> list[dict[str, Any]]:
+    """``records`` without the spare trainings that presets with spares did not keep.
+
+    Per (preset with its overrides, env, method, noise), the ``spare_trainings`` finished
+    trainings with the lowest validation control are left out (ties: the higher best
+    validation loss, then the higher seed), so the full grid keeps ``num_models`` (and a
+    grid run with ``--num-models 1`` keeps 1 of its 2 trainings). The kept records are
+    copied with ``selection``: the rule and every training's seed, validation and evaluation
+    mean. A cell with a training that has no validation score, or with no more trainings
+    than spares, keeps every training. Records of other presets pass unchanged.
+    """
+    pools = {preset.name: preset for preset in presets if preset.spare_trainings}
+    by_cell: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    for rec in records:
+        s = rec["spec"]
+        preset = pools.get(str(s.get("preset", "")).split("+", 1)[0])
+        if preset is not None and s["method"] not in REFERENCE_METHODS:
+            by_cell.setdefault((s["preset"], s["env_id"], s["method"], s["noise_std"]),
+                               []).append(rec)
+    replaced: dict[int, dict[str, Any] | None] = {}
+    for (label, *_), trainings in by_cell.items():
+        preset = pools[label.split("+", 1)[0]]
+        by_seed = {int(r["spec"]["seed"]): r for r in trainings}
+        expected = sorted(by_seed)
+        keep = len(expected) - preset.spare_trainings
+        if keep < 1 or any("validation" not in r for r in trainings):
+            continue
+
+        def rank(seed: int) -> tuple[float, float, int]:
+            record = by_seed[seed]
+            loss = record.get("training", {}).get("best_validation_loss")
+            return (-float(record["validation"]["mean"]),
+                    math.inf if loss is None else float(loss), seed)
+
+        kept_seeds = sorted(expected, key=rank)[:keep]
+        selection = {
+            "rule": f"the {keep} of {len(expected)} trainings with the highest validation "
+                    "control (task seed 2021)",
+            "trainings": [{"seed": seed, "validation_mean": by_seed[seed]["validation"]["mean"],
+                           "mean": by_seed[seed]["mean"], "kept": seed in kept_seeds}
+                          for seed in expected],
+        }
+        for seed in expected:
+            record = by_seed[seed]
+            replaced[id(record)] = ({**record, "selection": selection}
+                                    if seed in kept_seeds else None)
+    kept = []
+    for rec in records:
+        new = replaced.get(id(rec), rec)
+        if new is not None:
+            kept.append(new)
+    return kept
 
 
 def _is_training_of(spec: dict[str, Any], preset: ReproducePreset) -> bool:

@@ -62,6 +62,7 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True,
                             patience=preset.patience,
                             flush_denormals=preset.flush_denormals,
                             learning_rate=preset.learning_rate,
+                            validation_tasks=preset.validation_tasks,
                             **common,
                         )
                     )

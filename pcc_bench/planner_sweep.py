@@ -32,12 +32,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pcc_agent.evaluation import VALIDATION_TASK_SEED
 from pcc_agent.io import atomic_write_json
 from pcc_bench.arguments import command_parser
 from pcc_bench.presets import REPRODUCE_PRESETS
 
-#: Task seed of the validation split the settings are chosen on.
-VALIDATION_TASK_SEED = 2021
 #: Planner fields a sweep can vary, with their command-line option and type.
 SWEPT_FIELDS: dict[str, tuple[str, type]] = {
     "plan_length": ("--plan-lengths", int),

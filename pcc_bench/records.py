@@ -33,7 +33,13 @@ REFERENCE_METHODS = (ORACLE, NO_ACTION)
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One cell of the grid: one model (or a reference controller) and its control tasks."""
+    """One cell of the grid: one model (or a reference controller) and its control tasks.
+
+    ``validation_tasks``: when set, the trained model also runs that many validation tasks
+    (``pcc_agent.evaluation.VALIDATION_TASK_SEED``), recorded as ``validation``; the presets
+    with spare trainings keep their models by that score. The other optional fields are
+    command-line overrides of the preset (None: the preset's value).
+    """
 
     env_id: str
     method: str
@@ -48,6 +54,7 @@ class RunSpec:
     patience: int | None = None
     flush_denormals: bool | None = None
     learning_rate: float | None = None
+    validation_tasks: int | None = None
 
     @property
     def relative_path(self) -> Path:

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from pcc_agent.io import atomic_write_json, atomic_write_text
-from pcc_bench.aggregation import aggregate, select_restarts
+from pcc_bench.aggregation import aggregate, choose_models
 from pcc_bench.arguments import (
     command_parser,
     known_envs,
@@ -62,7 +62,7 @@ from pcc_bench.tables import (
 def write_summary(results_dir: Path) -> list[dict[str, Any]]:
     """Aggregate the run files into summary.json, summary.md and a bar chart."""
     records = load_records(results_dir)
-    rows = aggregate(records + select_restarts(records))
+    rows = aggregate(choose_models(records))
     if not rows:
         print("No finished runs to aggregate.")
         return rows

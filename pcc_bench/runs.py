@@ -124,6 +124,8 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         agent, record["weights"] = save_half_weights(agent, results_dir, spec)
         evaluation_start = time.perf_counter()
         evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
+        if spec.validation_tasks:
+            record["validation"] = validation_control(agent, spec, env_kwargs)
         _maybe_plot_latent_map(agent, spec, Path(results_dir))
     record["eval_seconds"] = time.perf_counter() - evaluation_start
     record["task_seeds"] = seeds
@@ -135,6 +137,20 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     if spec.method not in REFERENCE_METHODS:  # the training is complete, its record written
         remove_training_checkpoint(training_checkpoint_path(results_dir, spec))
     return record
+
+
+def validation_control(agent: Any, spec: RunSpec, env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """% in goal on the run's validation tasks (task seed 2021): the score trainings are kept by.
+
+    Run after the evaluation tasks, so those are planned exactly as without validation.
+    """
+    from pcc_agent.evaluation import VALIDATION_TASK_SEED, evaluate_control, task_seeds
+
+    assert spec.validation_tasks
+    seeds = task_seeds(VALIDATION_TASK_SEED, spec.validation_tasks)
+    evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
+    return {"task_seeds": seeds, "percentages": [t.percent_in_goal for t in evaluation.tasks],
+            "mean": evaluation.mean}
 
 
 def _reevaluate(
@@ -166,6 +182,8 @@ def _reevaluate(
     record["percentages"] = [t.percent_in_goal for t in evaluation.tasks]
     record["tasks"] = [t.to_dict() for t in evaluation.tasks]
     record["mean"] = evaluation.mean
+    if spec.validation_tasks:
+        record["validation"] = validation_control(agent, spec, env_kwargs)
     record["reevaluated"] = True
     record["command"] = " ".join(sys.argv)
     atomic_write_json(results_dir / spec.relative_path, record)

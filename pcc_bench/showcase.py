@@ -22,6 +22,23 @@ from pcc_bench.weights import saved_agent_path
 MAX_MODELS_SHOWN = 5
 
 
+def selection_lines(cell: dict[str, dict[int, dict[str, Any]]]) -> list[str]:
+    """One line per method whose trainings were chosen among (spare trainings): which, and why."""
+    from pcc_bench.aggregation import kept_trainings
+
+    lines = []
+    for method, by_seed in sorted(cell.items()):
+        chosen = [r for r in kept_trainings(list(by_seed.values())) if "selection" in r]
+        if not chosen:
+            continue
+        trainings = chosen[0]["selection"]["trainings"]
+        scores = ", ".join(f"#{t['seed']} {t['validation_mean']:.1f}"
+                           + ("" if t["kept"] else " (left out)") for t in trainings)
+        lines.append(f"{method}: {chosen[0]['selection']['rule']}; validation % in goal: "
+                     f"{scores}")
+    return lines
+
+
 def per_task_table(cell: dict[str, dict[int, dict[str, Any]]]) -> str:
     """Plain-text table: one line per task, one column per model, oracle and no action last.
 
@@ -67,6 +84,8 @@ def show_control(runs: Sequence[Any], results_dir: Path) -> list[Path]:
             continue
         print(f"\n{env_id} (noise {noise:g}): % of steps in goal per task")
         print(per_task_table(cell))
+        for line in selection_lines(cell):
+            print(line)
         for method, by_seed in sorted(cell.items()):
             if method in REFERENCE_METHODS:
                 continue

@@ -121,6 +121,10 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
         if registered is not None and registered.restarts > 1:
             recipe += (f"; each model the best of {registered.restarts} trainings by "
                        "validation loss")
+        if registered is not None and registered.spare_trainings:
+            recipe += (f"; the {registered.num_models} of "
+                       f"{registered.num_models + registered.spare_trainings} trainings that "
+                       "control best on validation tasks (task seed 2021)")
         lines.append(
             f"| {env} | {preset} | {method} | {s.get('episode_length', '-')} "
             f"| {p.get('plan_length')} ({p.get('replan_every', 1)}) "

@@ -18,7 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 from pcc_agent.io import atomic_save_figure, atomic_write_json, atomic_write_text
-from pcc_bench.aggregation import is_restart_training, select_restarts
+from pcc_bench.aggregation import choose_models, is_restart_training
 from pcc_bench.records import NO_ACTION, ORACLE, load_records
 from pcc_bench.zero_action import contains_zero_action, zero_action_percentages
 
@@ -121,7 +121,7 @@ def summarize(
         ]
     model_based: dict[str, Any] = {}
     records = load_records(reproduce_dir) if reproduce_dir.exists() else []
-    for rec in records + select_restarts(records):
+    for rec in choose_models(records):
         spec = rec["spec"]
         if (spec["env_id"] != env_id or spec["noise_std"] != 0.0 or not same_tasks(rec)
                 or is_restart_training(spec)):

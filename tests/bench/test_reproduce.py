@@ -868,3 +868,63 @@ def test_status_of_the_quick_preset_comes_from_its_committed_runs(tmp_path, caps
     assert measured / 1.5 < 60 * minutes < measured * 1.5
     assert "Based on: 5 runs from the mean time of finished runs of the same kind" in out
     assert "results/quick" in out
+
+
+def test_spare_trainings_keep_the_models_that_control_best_on_validation_tasks():
+    from pcc_bench.aggregation import choose_models, kept_trainings
+    from pcc_bench.grid import expand_grid
+    from pcc_bench.presets import REPRODUCE_PRESETS, VALIDATION_TASKS
+    from pcc_bench.showcase import selection_lines
+
+    quick = REPRODUCE_PRESETS["quick"]
+    assert quick.spare_trainings == 1
+    trainings = [r for r in expand_grid(quick) if r.method == "pcc"]
+    assert [r.seed for r in trainings] == [0, 1, 2, 3]
+    assert {r.validation_tasks for r in trainings} == {VALIDATION_TASKS}
+    assert {r.preset for r in trainings} == {"quick"}
+
+    def rec(seed, validation, loss, mean, preset="quick"):
+        return {"spec": {"env_id": "pcc/Planar-v0", "method": "pcc", "noise_std": 0.0,
+                         "preset": preset, "seed": seed, "model_variant": "fast"},
+                "training": {"best_validation_loss": loss}, "percentages": [mean, mean],
+                "validation": {"mean": validation}, "mean": mean, "train_seconds": 10.0}
+
+    # Seed 2 folded (0 on validation); seeds 1 and 3 tie on validation, 3 has the lower loss.
+    records = [rec(0, 70.0, 135.0, 75.0), rec(1, 60.0, 140.0, 66.0),
+               rec(2, 0.0, 138.0, 0.0), rec(3, 60.0, 139.0, 50.0)]
+    kept = kept_trainings(records)
+    assert [r["spec"]["seed"] for r in kept] == [0, 1, 3]
+    assert [t["kept"] for t in kept[0]["selection"]["trainings"]] == [True, True, False, True]
+    (row,) = aggregate(choose_models(records))
+    assert row["seeds"] == [0, 1, 3] and row["n_models"] == row["n_models_planned"] == 3
+    assert row["mean_all"] == pytest.approx((75.0 + 66.0 + 50.0) / 3)
+    line = selection_lines({"pcc": {r["spec"]["seed"]: r for r in records}})[0]
+    assert "the 3 of 4 trainings" in line and "#2 0.0 (left out)" in line
+    # The worst of the trainings done so far is left out (a reduced grid); with no more
+    # trainings than spares, or a training without a validation score, none is.
+    assert [r["spec"]["seed"] for r in kept_trainings(records[:3])] == [0, 1]
+    assert kept_trainings(records[:1]) == records[:1]
+    unscored = [records[0], records[1], records[2], {**records[3], "validation": None}]
+    del unscored[3]["validation"]
+    assert kept_trainings(unscored) == unscored
+    # Overridden runs ("quick+max_epochs=5") choose among their own trainings; others pass.
+    short = [rec(k, 10.0 * k, 140.0, 1.0, "quick+max_epochs=5") for k in range(4)]
+    assert [r["spec"]["seed"] for r in kept_trainings(short)] == [1, 2, 3]
+    other = [rec(k, 0.0, 140.0, 1.0, "paper-fast") for k in range(4)]
+    assert kept_trainings(other) == other
+    # Explicit seeds are run as given; restarts and spares do not mix.
+    assert quick.replace(model_seeds=(5,)).seeds() == (5,)
+    with pytest.raises(ValueError, match="not both"):
+        quick.replace(restarts=2)
+
+
+def test_a_run_with_validation_tasks_records_its_validation_control(tmp_path):
+    spec = dataclasses.replace(tiny_spec(), validation_tasks=2)
+    record = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    validation = record["validation"]
+    assert len(validation["percentages"]) == 2 and len(validation["task_seeds"]) == 2
+    assert validation["mean"] == pytest.approx(sum(validation["percentages"]) / 2)
+    assert set(validation["task_seeds"]).isdisjoint(record["task_seeds"])
+    # The evaluation tasks are planned exactly as without validation tasks.
+    plain = execute_run(tiny_spec(), tmp_path / "plain", str(tmp_path / "data"))
+    assert plain["percentages"] == record["percentages"] and "validation" not in plain
