@@ -239,13 +239,7 @@ def kept_trainings(
         if keep < 1 or any("validation" not in r for r in trainings):
             continue
 
-        def rank(seed: int) -> tuple[float, float, int]:
-            record = by_seed[seed]
-            loss = record.get("training", {}).get("best_validation_loss")
-            return (-float(record["validation"]["mean"]),
-                    math.inf if loss is None else float(loss), seed)
-
-        kept_seeds = sorted(expected, key=rank)[:keep]
+        kept_seeds = sorted(expected, key=lambda seed: _validation_rank(by_seed[seed]))[:keep]
         selection = {
             "rule": f"the {keep} of {len(expected)} trainings with the highest validation "
                     "control (task seed 2021)",
@@ -263,6 +257,13 @@ def kept_trainings(
         if new is not None:
             kept.append(new)
     return kept
+
+
+def _validation_rank(record: dict[str, Any]) -> tuple[float, float, int]:
+    """Sort key of a training: the highest validation control, the lowest loss, the lowest seed."""
+    loss = record.get("training", {}).get("best_validation_loss")
+    return (-float(record["validation"]["mean"]), math.inf if loss is None else float(loss),
+            int(record["spec"]["seed"]))
 
 
 def _is_training_of(spec: dict[str, Any], preset: ReproducePreset) -> bool:
