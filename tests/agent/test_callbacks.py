@@ -1,0 +1,82 @@
+"""pcc_agent.callbacks: keeping the weights that control best on validation tasks."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import pytest
+import torch
+
+import pcc_envs  # noqa: F401
+from pcc_agent import PCCAgent
+from pcc_agent.callbacks import KeepBestControl, validation_task_score
+from pcc_agent.planning.config import PlannerConfig
+from pcc_agent.presets import get_preset
+
+ENV_ID = "pcc/Planar-v0"
+
+
+def tiny_agent(cache, epochs: int = 4) -> PCCAgent:
+    preset = get_preset(ENV_ID)
+    preset = dataclasses.replace(
+        preset, train=dataclasses.replace(preset.train, epochs=epochs, batch_size=64),
+        planner=PlannerConfig(plan_length=5, iterations=2, mpc_iterations=1, num_candidates=2))
+    return PCCAgent(ENV_ID, method="pcc", preset=preset, seed=1, data_cache_dir=cache)
+
+
+def weights(agent: PCCAgent) -> dict[str, torch.Tensor]:
+    return {k: v.clone() for k, v in agent.model.state_dict().items()}
+
+
+def scripted(values: list[float], seen: list[dict[str, torch.Tensor]]):
+    """A score that plans one step (as a real score would) and returns the next value."""
+    obs, _ = gym.make(ENV_ID).reset(seed=5)
+
+    def score(agent: PCCAgent) -> float:
+        agent.predict(obs)
+        seen.append(weights(agent))
+        return values[len(seen) - 1]
+
+    return score
+
+
+def same(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool:
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_training_ends_with_the_weights_of_the_best_score(tmp_path):
+    seen: list[dict[str, torch.Tensor]] = []
+    keep = KeepBestControl(scripted([5.0, 1.0, 3.0], seen), every=2)  # epochs 2, 4, the end
+    agent = tiny_agent(tmp_path).learn(total_timesteps=300, callback=keep)
+    assert keep.history == [(2, 5.0), (4, 1.0), (-1, 3.0)]
+    assert keep.best_epoch == 2 and keep.best_score == 5.0
+    assert same(weights(agent), seen[0]) and not same(seen[0], seen[2])
+
+
+def test_the_trainers_weights_stay_when_they_score_best_and_nothing_else_changes(tmp_path):
+    obs, _ = gym.make(ENV_ID).reset(seed=9)
+    plain = tiny_agent(tmp_path).learn(total_timesteps=300)
+    seen: list[dict[str, torch.Tensor]] = []
+    keep = KeepBestControl(scripted([1.0, 2.0, 3.0, 4.0], seen), every=1, start=2)
+    agent = tiny_agent(tmp_path).learn(total_timesteps=300, callback=keep)
+    assert [epoch for epoch, _ in keep.history] == [2, 3, 4, -1] and keep.best_epoch == -1
+    # Scoring (planning mid-training) changed neither the training nor later planning.
+    assert same(weights(agent), weights(plain))
+    assert agent.predict(obs)[0].tolist() == plain.predict(obs)[0].tolist()
+
+
+def test_validation_task_score_plans_on_the_validation_tasks(tmp_path):
+    agent = tiny_agent(tmp_path, epochs=1).learn(total_timesteps=200)
+    value = validation_task_score(ENV_ID, num_tasks=1)(agent)
+    assert 0.0 <= value <= 100.0
+
+
+@pytest.mark.parametrize("kwargs, error", [
+    ({"score": 3}, TypeError), ({"score": len, "every": 0}, ValueError),
+    ({"score": len, "start": -1}, ValueError)])
+def test_bad_settings_are_refused(kwargs, error):
+    with pytest.raises(error):
+        KeepBestControl(**kwargs)
+    with pytest.raises(ValueError, match="num_tasks"):
+        validation_task_score(ENV_ID, num_tasks=0)
