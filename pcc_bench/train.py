@@ -8,6 +8,7 @@ Examples:
     python -m pcc_bench.train --env pcc/Planar-v0
     python -m pcc_bench.train --env pcc/Planar-v0 --method e2c --samples 2000 --epochs 20 \
         --output planar_e2c.pt
+    python -m pcc_bench.train --env pcc/Planar-v0 --keep-best-control 25
 """
 
 from __future__ import annotations
@@ -55,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--output", type=Path, default=None,
                         help=f"The saved agent (default: {DEFAULT_MODELS_DIR}/"
                         "<env>_<method>_seed<seed>.pt).")
+    parser.add_argument("--keep-best-control", type=positive_int, default=None, metavar="EVERY",
+                        help="Score control on 5 validation tasks (task seed 2021) every EVERY "
+                        "epochs and save the weights that score best, instead of those of the "
+                        "lowest validation loss (pcc_agent.callbacks.KeepBestControl).")
     parser.add_argument("--no-progress", action="store_true", help="No progress bar.")
     return parser
 
@@ -71,11 +76,26 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise SystemExit(f"--epochs needs a preset; {args.env!r} has none.")
         preset = dataclasses.replace(preset, train=dataclasses.replace(preset.train,
                                                                        epochs=args.epochs))
+    keep = None
+    if args.keep_best_control is not None:
+        if isinstance(preset, str):
+            raise SystemExit(f"--keep-best-control needs an env with control tasks; "
+                             f"{args.env!r} has none.")
+        from pcc_agent.callbacks import KeepBestControl, validation_task_score
+
+        keep = KeepBestControl(validation_task_score(args.env), every=args.keep_best_control)
     agent = PCCAgent(args.env, method=args.method, preset=preset, seed=args.seed,
                      device=args.device, data_cache_dir=args.data_dir)
     start = time.perf_counter()
-    agent.learn(total_timesteps=args.samples, progress_bar=not args.no_progress)
+    agent.learn(total_timesteps=args.samples, progress_bar=not args.no_progress, callback=keep)
     seconds = time.perf_counter() - start
+    if keep is not None:
+        scores = ", ".join(f"{'final' if epoch < 0 else epoch} {score:.1f}"
+                           for epoch, score in keep.history)
+        kept = "the lowest validation loss's" if keep.best_epoch == -1 else (
+            f"epoch {keep.best_epoch}'s")
+        print(f"Validation control (% in goal, 5 tasks) by epoch: {scores}; kept {kept} "
+              "weights.")
     output = args.output or default_output(agent.env_id, args.method, args.seed)
     agent.save(output)
     # The progress bar already printed why training stopped; without it, say it here.

@@ -60,6 +60,15 @@ def test_train_then_evaluate(tmp_path, capsys):
     assert (tmp_path / "eval.json").exists()
 
 
+def test_train_keeps_the_weights_that_control_best(tmp_path, capsys):
+    assert cli.main(["train", "--env", "pcc/Planar-v0", "--samples", "200", "--epochs", "2",
+                     "--keep-best-control", "1", "--output", str(tmp_path / "planar.pt"),
+                     "--data-dir", str(tmp_path / "data"), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "Validation control (% in goal, 5 tasks) by epoch: 1 " in out and "final" in out
+    assert "kept " in out and (tmp_path / "planar.pt").exists()
+
+
 def test_evaluate_refuses_a_missing_model(tmp_path):
     with pytest.raises(SystemExit, match="No saved agent"):
         cli.main(["evaluate", str(tmp_path / "none.pt")])
