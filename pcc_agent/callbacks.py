@@ -10,7 +10,7 @@ session of 2026-12-05). Scoring control every few epochs costs a few planned epi
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import torch
@@ -112,13 +112,12 @@ def validation_task_score(env_id: str, num_tasks: int = 5, env_kwargs: dict[str,
     The tasks are drawn with ``pcc_agent.evaluation.VALIDATION_TASK_SEED`` (2021), never the
     evaluation tasks' 2020.
     """
-    from pcc_agent.evaluation import VALIDATION_TASK_SEED, evaluate_control, task_seeds
+    from pcc_agent.evaluation import evaluate_on_validation_tasks
 
     if num_tasks < 1:
         raise ValueError(f"num_tasks must be >= 1, got {num_tasks}.")
-    seeds: Sequence[int] = task_seeds(VALIDATION_TASK_SEED, num_tasks)
 
     def score(agent: Any) -> float:
-        return evaluate_control(agent, env_id, seeds, env_kwargs).mean
+        return evaluate_on_validation_tasks(agent, env_id, num_tasks, env_kwargs).mean
 
     return score

@@ -29,6 +29,7 @@ __all__ = [
     "ControlEvaluation",
     "TaskResult",
     "evaluate_control",
+    "evaluate_on_validation_tasks",
     "format_mean_se",
     "standard_error",
     "task_seeds",
@@ -187,3 +188,23 @@ def evaluate_control(
             )
         )
     return ControlEvaluation(env_id=env_id, tasks=results)
+
+
+def evaluate_on_validation_tasks(
+    policy: PolicyLike | Callable[[gym.Env], PolicyLike],
+    env_id: str,
+    num_tasks: int = 5,
+    env_kwargs: dict[str, Any] | None = None,
+) -> ControlEvaluation:
+    """:func:`evaluate_control` on ``num_tasks`` validation tasks (:data:`VALIDATION_TASK_SEED`).
+
+    The one definition of the validation tasks that trainings, checkpoints and settings are
+    chosen on, so that the evaluation tasks stay unseen.
+
+    Raises:
+        ValueError: ``num_tasks`` below 1.
+    """
+    if num_tasks < 1:
+        raise ValueError(f"num_tasks must be >= 1, got {num_tasks}.")
+    return evaluate_control(policy, env_id, task_seeds(VALIDATION_TASK_SEED, num_tasks),
+                            env_kwargs)

@@ -144,12 +144,13 @@ def validation_control(agent: Any, spec: RunSpec, env_kwargs: dict[str, Any]) ->
 
     Run after the evaluation tasks, so those are planned exactly as without validation.
     """
-    from pcc_agent.evaluation import VALIDATION_TASK_SEED, evaluate_control, task_seeds
+    from pcc_agent.evaluation import evaluate_on_validation_tasks
 
     assert spec.validation_tasks
-    seeds = task_seeds(VALIDATION_TASK_SEED, spec.validation_tasks)
-    evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
-    return {"task_seeds": seeds, "percentages": [t.percent_in_goal for t in evaluation.tasks],
+    evaluation = evaluate_on_validation_tasks(agent, spec.env_id, spec.validation_tasks,
+                                              env_kwargs)
+    return {"task_seeds": [t.seed for t in evaluation.tasks],
+            "percentages": [t.percent_in_goal for t in evaluation.tasks],
             "mean": evaluation.mean}
 
 
