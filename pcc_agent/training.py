@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import dataclasses
+import functools
 import json
 import math
 import time
@@ -298,6 +299,7 @@ class Trainer:
         self.epoch_callback = epoch_callback
         self.shuffle_generator = torch.Generator().manual_seed(config.seed)
         self.noise_generator = torch.Generator(device=self.device).manual_seed(config.seed + 1)
+        self.bf16_autocast = uses_bf16_autocast(config.mixed_precision, self.device)
         self._logger: Any = None
 
     # ------------------------------------------------------------------ helpers
@@ -310,7 +312,15 @@ class Trainer:
 
     def _config_dict(self) -> dict[str, Any]:
         return {"method": self.method, "train_config": self.config.to_dict(),
-                "model": self.model.architecture(), **self.run_info}
+                "model": self.model.architecture(), "bf16_autocast": self.bf16_autocast,
+                **self.run_info}
+
+    def _loss(self, batch: TransitionBatch, config: TrainConfig,
+              generator: torch.Generator) -> tuple[torch.Tensor, dict[str, float]]:
+        """The method's loss on ``batch``, under bfloat16 autocast when that is on."""
+        with torch.autocast(self.device.type, dtype=torch.bfloat16,
+                            enabled=self.bf16_autocast):
+            return self.loss_fn(self.model, batch, config, generator)
 
     def _make_logger(self) -> Any:
         if self.log_dir is None:
@@ -348,8 +358,7 @@ class Trainer:
         with torch.no_grad():
             for start in range(0, len(idx), self.config.batch_size):
                 chunk = idx[start:start + self.config.batch_size]
-                loss, _ = self.loss_fn(self.model, self._batch(tensors, chunk), self.config,
-                                       generator)
+                loss, _ = self._loss(self._batch(tensors, chunk), self.config, generator)
                 total += float(loss) * len(chunk)
                 count += len(chunk)
         self.model.train()
@@ -481,8 +490,8 @@ class Trainer:
                 try:
                     for start in range(0, len(order), self.config.batch_size):
                         idx = order[start:start + self.config.batch_size].to(self.device)
-                        loss, metrics = self.loss_fn(self.model, self._batch(tensors, idx),
-                                                     epoch_config, self.noise_generator)
+                        loss, metrics = self._loss(self._batch(tensors, idx), epoch_config,
+                                                   self.noise_generator)
                         self._check(metrics["loss"], best_train)
                         self.optimizer.zero_grad(set_to_none=True)
                         loss.backward()
@@ -585,6 +594,55 @@ class Trainer:
             if key != "epoch":
                 self._logger.record(key, value)
         self._logger.dump(int(row["epoch"]))
+
+
+@functools.cache
+def _cpu_flags() -> frozenset[str]:
+    """The CPU's feature flags from ``/proc/cpuinfo`` (empty where there is none)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text(encoding="utf-8")
+    except OSError:
+        return frozenset()
+    for line in text.splitlines():
+        if line.startswith("flags"):
+            return frozenset(line.split(":", 1)[1].split())
+    return frozenset()
+
+
+def native_bf16(device: torch.device | str = "cpu") -> bool:
+    """Whether ``device`` multiplies bfloat16 in hardware.
+
+    A CPU does with AMX (``amx_bf16``) or AVX512-BF16 (``avx512_bf16``), read from
+    ``/proc/cpuinfo`` (other systems: False); a CUDA device when
+    :func:`torch.cuda.is_bf16_supported` says so.
+    """
+    device = torch.device(device)
+    if device.type == "cuda":
+        return bool(torch.cuda.is_bf16_supported())
+    if device.type != "cpu":
+        return False
+    return bool(_cpu_flags() & {"amx_bf16", "avx512_bf16"})
+
+
+def uses_bf16_autocast(mixed_precision: str, device: torch.device | str) -> bool:
+    """Whether :attr:`TrainConfig.mixed_precision` turns bfloat16 autocast on for ``device``.
+
+    ``"off"``: never; ``"auto"``: where :func:`native_bf16`; ``"bf16"``: always, with a
+    warning where the hardware would emulate it (slower than float32).
+    """
+    if mixed_precision == "off":
+        return False
+    native = native_bf16(device)
+    if mixed_precision == "auto":
+        return native
+    if mixed_precision != "bf16":
+        raise ValueError(f"mixed_precision must be 'off', 'bf16' or 'auto', got "
+                         f"{mixed_precision!r}.")
+    if not native:
+        warnings.warn(f"mixed_precision='bf16' on {torch.device(device)}, which has no native "
+                      "bfloat16: it is emulated and slower than float32 ('auto' would use "
+                      "float32 here).", RuntimeWarning, stacklevel=3)
+    return True
 
 
 def denormals_flushed() -> bool:
