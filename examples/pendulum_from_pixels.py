@@ -210,6 +210,7 @@ def train_one(seed: int, options: dict[str, Any], deadline: float, threads: int 
 
     from pcc_agent.training import uses_bf16_autocast
 
+    started = time.time()
     if threads is not None:
         torch.set_num_threads(threads)
     train_env = make_pixel_env(max_episode_steps=options["rollout_steps"] + 1,
@@ -230,8 +231,15 @@ def train_one(seed: int, options: dict[str, Any], deadline: float, threads: int 
         from pcc_agent.callbacks import KeepBestControl
 
         validation = range(seed + 2000, seed + 2000 + options["select_episodes"])
-        keep = KeepBestControl(lambda a: mean_control(a, eval_env, validation, options["steps"]),
-                               every=options["select_every"], start=options["select_from"])
+
+        def score(agent_: Any) -> float:  # and a progress line per score, in every process
+            value = mean_control(agent_, eval_env, validation, options["steps"])
+            print(f"seed {seed}, epoch {keep.n_calls} ({(time.time() - started) / 60:.1f} "
+                  f"min): validation control {value:.1f} %", flush=True)
+            return value
+
+        keep = KeepBestControl(score, every=options["select_every"],
+                               start=options["select_from"])
         callbacks.insert(0, keep)
     data = collect_transitions(train_env, options["samples"], options["rollout_steps"], seed)
     agent.learn(dataset=data, callback=callbacks, progress_bar=options["progress_bar"])
@@ -284,9 +292,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                         help="no per-pixel input standardization (the paper's input)")
     parser.add_argument("--warmup-epochs", type=int, default=WARMUP_EPOCHS,
                         help="KL warm-up epochs (0: none, as the paper)")
-    parser.add_argument("--mixed-precision", choices=("off", "bf16", "auto"), default="auto",
-                        help="bfloat16 autocast in training: 'auto' where the CPU has AMX or "
-                        "AVX512-BF16 (TrainConfig.mixed_precision)")
+    parser.add_argument("--mixed-precision", choices=("off", "bf16", "auto"), default="off",
+                        help="bfloat16 autocast in training ('auto': where the CPU has AMX or "
+                        "AVX512-BF16; TrainConfig.mixed_precision); off: float32")
     parser.add_argument("--select-every", type=int, default=10,
                         help="score control on validation starts every this many epochs and "
                         "keep the best-scoring weights (0: keep the lowest validation loss's)")

@@ -12,12 +12,16 @@ from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_model, s
 from pcc_agent.losses import model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ModelConfig, TrainConfig
+from pcc_agent import training
 from pcc_agent.training import (
+    Trainer,
     dataset_arrays,
     denormals_flushed,
     flushed_denormals,
+    native_bf16,
     resolve_device,
     train_embedding,
+    uses_bf16_autocast,
 )
 
 pytestmark = pytest.mark.usefixtures("single_torch_thread")
@@ -89,6 +93,46 @@ def test_flushed_denormals_is_scoped_and_reaches_the_training():
     _train(planar_like(96), config=dataclasses.replace(TRAIN, flush_denormals=False),
            epoch_callback=lambda epoch, metrics: modes.append(denormals_flushed()))
     assert modes == [False] * TRAIN.epochs
+
+
+@pytest.mark.parametrize("flags, native", [({"amx_bf16", "avx512f"}, True),
+                                           ({"avx512_bf16"}, True), ({"avx2", "fma"}, False)])
+def test_mixed_precision_is_bf16_only_where_the_cpu_multiplies_it(monkeypatch, flags, native):
+    monkeypatch.setattr(training, "_cpu_flags", lambda: frozenset(flags))
+    assert native_bf16("cpu") is native
+    assert uses_bf16_autocast("off", "cpu") is False
+    assert uses_bf16_autocast("auto", "cpu") is native
+    if native:
+        assert uses_bf16_autocast("bf16", "cpu") is True
+    else:
+        with pytest.warns(RuntimeWarning, match="emulated"):
+            assert uses_bf16_autocast("bf16", "cpu") is True
+    with pytest.raises(ValueError, match="mixed_precision"):
+        TrainConfig(mixed_precision="fp16")
+
+
+def test_bf16_training_computes_in_bf16_keeps_float32_weights_and_is_deterministic(
+        monkeypatch):
+    monkeypatch.setattr(training, "_cpu_flags", lambda: frozenset({"amx_bf16"}))
+    config = dataclasses.replace(TRAIN, epochs=2, mixed_precision="bf16")
+    dtypes = []
+    hook = torch.nn.modules.module.register_module_forward_hook(
+        lambda module, args, output: dtypes.append(output.dtype)
+        if isinstance(module, torch.nn.Linear) else None)
+    try:
+        first, result = _train(planar_like(160), config=config)
+    finally:
+        hook.remove()
+    assert torch.bfloat16 in dtypes  # the products ran in bfloat16
+    assert all(p.dtype == torch.float32 for p in first.parameters())
+    assert all(math.isfinite(row["val/loss"]) for row in result.history)
+    second, _ = _train(planar_like(160), config=config)
+    for (name, a), (_, b) in zip(first.state_dict().items(), second.state_dict().items()):
+        assert torch.equal(a, b), name
+    fp32, _ = _train(planar_like(160), config=dataclasses.replace(config, mixed_precision="off"))
+    assert not torch.equal(first.encoder.head.weight, fp32.encoder.head.weight)
+    model = EmbeddingModel((1, SIZE, SIZE), 2, CONFIG, seed=0)
+    assert Trainer(model, config, device="cpu")._config_dict()["bf16_autocast"] is True
 
 
 @pytest.mark.parametrize("method", ["e2c", "rce"])
