@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
+from pcc_agent import training
 from pcc_agent.checkpoint import CheckpointError, load_checkpoint, load_model, save_checkpoint
 from pcc_agent.losses import model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ModelConfig, TrainConfig
-from pcc_agent import training
 from pcc_agent.training import (
     Trainer,
     dataset_arrays,

@@ -1,4 +1,4 @@
-"""examples/pendulum_from_pixels.py: its wrapped env and the agent's plans on it (no training)."""
+"""examples/pendulum_from_pixels.py: its wrapped env, the agent's plans on it, a tiny run."""
 
 from __future__ import annotations
 
@@ -49,3 +49,19 @@ def test_agent_plans_within_the_pendulums_torque_range(example):
         assert env.action_space.contains(action)
         actions.append(float(action[0]))
     assert max(abs(a) for a in actions) > 1.0, actions  # [-2, 2], not the pcc envs' [-1, 1]
+
+
+def test_two_trainings_side_by_side_report_the_one_chosen_on_validation_starts(example, tmp_path):
+    out = tmp_path / "result.json"
+    result = example.main(["--samples", "200", "--epochs", "2", "--episodes", "1", "--steps",
+                           "5", "--select-every", "1", "--select-from", "1",
+                           "--select-episodes", "1", "--choose-episodes", "2",
+                           "--out", str(out)])
+    assert [t["seed"] for t in result["trainings"]] == [0, 1]
+    assert all(t["epochs"] == 2 and t["choice_score"] is not None
+               for t in result["trainings"])
+    scores = [t["choice_score"] for t in result["trainings"]]
+    assert result["chosen_seed"] == int(np.argmax(scores))  # ties: the first
+    assert len(result["percent_upright"]) == 1 and out.exists()
+    with pytest.raises(SystemExit):
+        example.main(["--trainings", "0"])
