@@ -320,8 +320,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--save", help="save the chosen agent here")
     parser.add_argument("--out", help="write the result as JSON here")
     args = parser.parse_args(argv)
-    if args.trainings < 1:
-        parser.error(f"--trainings must be >= 1, got {args.trainings}")
+    for name in ("trainings", "episodes", "steps", "choose_episodes", "select_episodes"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
 
     import tempfile
 
