@@ -173,6 +173,15 @@ class ModelConfig:
         return cls(**values)
 
 
+MIXED_PRECISION_MODES = ("off", "bf16", "auto")  #: values of TrainConfig.mixed_precision
+
+
+def check_mixed_precision(mode: str) -> None:
+    """Raise ``ValueError`` unless ``mode`` is one of :data:`MIXED_PRECISION_MODES`."""
+    if mode not in MIXED_PRECISION_MODES:
+        raise ValueError(f"mixed_precision must be one of {MIXED_PRECISION_MODES}, got {mode!r}.")
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Optimization and loss hyper-parameters (paper Appendix "Training Hyper-Parameters").
@@ -275,11 +284,7 @@ class TrainConfig:
                 "curvature_expansion must be 'perturbed' or 'nominal', got "
                 f"{self.curvature_expansion!r}."
             )
-        if self.mixed_precision not in ("off", "bf16", "auto"):
-            raise ValueError(
-                "mixed_precision must be 'off', 'bf16' or 'auto', got "
-                f"{self.mixed_precision!r}."
-            )
+        check_mixed_precision(self.mixed_precision)
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-serializable dict."""

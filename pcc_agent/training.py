@@ -33,7 +33,7 @@ from pcc_agent.checkpoint import (
     load_weights,
     save_checkpoint,
 )
-from pcc_agent.config import TrainConfig
+from pcc_agent.config import TrainConfig, check_mixed_precision
 from pcc_agent.io import atomic_write_text, sb3_logger
 from pcc_agent.losses import METHODS, TransitionBatch, get_loss
 from pcc_agent.model import EmbeddingModel
@@ -597,8 +597,8 @@ class Trainer:
 
 
 @functools.cache
-def _cpu_flags() -> frozenset[str]:
-    """The CPU's feature flags from ``/proc/cpuinfo`` (empty where there is none)."""
+def cpu_flags() -> frozenset[str]:
+    """The CPU's feature flags from ``/proc/cpuinfo`` (empty where there is none: not Linux)."""
     try:
         text = Path("/proc/cpuinfo").read_text(encoding="utf-8")
     except OSError:
@@ -621,7 +621,7 @@ def native_bf16(device: torch.device | str = "cpu") -> bool:
         return bool(torch.cuda.is_bf16_supported())
     if device.type != "cpu":
         return False
-    return bool(_cpu_flags() & {"amx_bf16", "avx512_bf16"})
+    return bool(cpu_flags() & {"amx_bf16", "avx512_bf16"})
 
 
 def uses_bf16_autocast(mixed_precision: str, device: torch.device | str) -> bool:
@@ -630,14 +630,12 @@ def uses_bf16_autocast(mixed_precision: str, device: torch.device | str) -> bool
     ``"off"``: never; ``"auto"``: where :func:`native_bf16`; ``"bf16"``: always, with a
     warning where the hardware would emulate it (slower than float32).
     """
+    check_mixed_precision(mixed_precision)
     if mixed_precision == "off":
         return False
     native = native_bf16(device)
     if mixed_precision == "auto":
         return native
-    if mixed_precision != "bf16":
-        raise ValueError(f"mixed_precision must be 'off', 'bf16' or 'auto', got "
-                         f"{mixed_precision!r}.")
     if not native:
         warnings.warn(f"mixed_precision='bf16' on {torch.device(device)}, which has no native "
                       "bfloat16: it is emulated and slower than float32 ('auto' would use "

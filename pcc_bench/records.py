@@ -84,11 +84,9 @@ def machine_info() -> dict[str, Any]:
     """
     import torch
 
-    try:
-        cpuinfo = Path("/proc/cpuinfo").read_text().split()
-    except OSError:  # not Linux
-        cpuinfo = []
-    simd = sorted({flag for flag in cpuinfo if flag.startswith(("avx", "amx", "fma"))})
+    from pcc_agent.training import cpu_flags
+
+    simd = sorted(flag for flag in cpu_flags() if flag.startswith(("avx", "amx", "fma")))
     return {
         "platform": platform.platform(),
         "cpu": cpu_name(),

@@ -98,7 +98,7 @@ def test_flushed_denormals_is_scoped_and_reaches_the_training():
 @pytest.mark.parametrize("flags, native", [({"amx_bf16", "avx512f"}, True),
                                            ({"avx512_bf16"}, True), ({"avx2", "fma"}, False)])
 def test_mixed_precision_is_bf16_only_where_the_cpu_multiplies_it(monkeypatch, flags, native):
-    monkeypatch.setattr(training, "_cpu_flags", lambda: frozenset(flags))
+    monkeypatch.setattr(training, "cpu_flags", lambda: frozenset(flags))
     assert native_bf16("cpu") is native
     assert uses_bf16_autocast("off", "cpu") is False
     assert uses_bf16_autocast("auto", "cpu") is native
@@ -113,7 +113,7 @@ def test_mixed_precision_is_bf16_only_where_the_cpu_multiplies_it(monkeypatch, f
 
 def test_bf16_training_computes_in_bf16_keeps_float32_weights_and_is_deterministic(
         monkeypatch):
-    monkeypatch.setattr(training, "_cpu_flags", lambda: frozenset({"amx_bf16"}))
+    monkeypatch.setattr(training, "cpu_flags", lambda: frozenset({"amx_bf16"}))
     config = dataclasses.replace(TRAIN, epochs=2, mixed_precision="bf16")
     dtypes = []
     hook = torch.nn.modules.module.register_module_forward_hook(
