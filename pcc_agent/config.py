@@ -25,6 +25,7 @@ __all__ = [
     "DomainPresets",
     "EnvPreset",
     "ModelConfig",
+    "EncoderKind",
     "NetworkKind",
     "PlannerConfig",
     "TrainConfig",
@@ -32,6 +33,7 @@ __all__ = [
 ]
 
 NetworkKind = Literal["mlp", "cnn"]
+EncoderKind = Literal["mlp", "cnn", "keypoints", "frame_cnn"]
 TransitionKind = Literal["mlp", "e2c_linear"]
 
 
@@ -56,8 +58,18 @@ class ModelConfig:
 
     Attributes:
         latent_dim: Dimension n_z of the latent space.
-        encoder_kind: ``"mlp"`` (flattened image -> hidden layers) or ``"cnn"``.
-        encoder_convs: CNN encoder convolutions (ignored for ``"mlp"``).
+        encoder_kind: ``"mlp"`` (flattened image -> hidden layers), ``"cnn"``, or
+            ``"keypoints"``: the convolutions run on each frame alone (shared weights), the
+            last one's channels are heatmaps whose spatial soft-argmax gives one (x, y)
+            keypoint per channel, and the hidden layers see the newest frame's keypoints and
+            their motion between frames. Sub-pixel motions, the velocity signal of a frame
+            pair, become differences of coordinates (a spatial softmax as in Levine et al.,
+            2016; not the paper's encoder). ``"frame_cnn"``: the convolutions run on each
+            frame alone, a linear layer makes ``encoder_frame_features`` features of each
+            frame, and the hidden layers see the newest frame's and their change between
+            frames (also not the paper's).
+        encoder_convs: CNN encoder convolutions (ignored for ``"mlp"``); for ``"keypoints"``
+            the last one has no ReLU and its channels are the keypoints.
         encoder_hidden: Hidden fully-connected layers (after the convolutions for ``"cnn"``);
             a final linear layer outputs the mean and log-variance (``2 * latent_dim``).
         encoder_downsample: Average-pooling factor applied to the image inside the encoder and
@@ -90,6 +102,12 @@ class ModelConfig:
         input_standardization: Standardize the encoder's and backward model's image input
             per pixel with statistics of the training images (a fixed preprocessing layer,
             no learned parameters; not in the paper, see ``docs/training.md``).
+        encoder_frame_features: Features per frame of the ``"frame_cnn"`` encoder.
+        encoder_motion_gain: With a value g > 0, the encoder sees each older frame as
+            ``g * (newest - older)`` beside the newest frame instead of the raw frames: the
+            same information, with the frame-to-frame change (the velocity signal, a small
+            grey-level difference at 20 ms) magnified from the first step. 0: raw frames (the
+            paper). The backward model's image input is unchanged.
         decoder_bias_init: Before training, set the decoder's output biases to the logits of
             the training images' mean pixel values, so that the decoder starts from the mean
             image (the static background) and the first gradient steps go to the moving
@@ -100,7 +118,7 @@ class ModelConfig:
     """
 
     latent_dim: int
-    encoder_kind: NetworkKind = "mlp"
+    encoder_kind: EncoderKind = "mlp"
     encoder_convs: tuple[ConvSpec, ...] = ()
     encoder_hidden: tuple[int, ...] = (300, 300)
     encoder_downsample: int = 1
@@ -118,6 +136,8 @@ class ModelConfig:
     backward_nx: int = 100
     backward_joint: int = 100
     input_standardization: bool = False
+    encoder_motion_gain: float = 0.0
+    encoder_frame_features: int = 32
     decoder_bias_init: bool = False
     min_logvar: float = -12.0
     max_logvar: float = 8.0
@@ -126,15 +146,18 @@ class ModelConfig:
         """Validate the values, with messages that say how to fix them."""
         if self.latent_dim < 1:
             raise ValueError(f"latent_dim must be >= 1, got {self.latent_dim}.")
-        for name in ("encoder_kind", "decoder_kind"):
-            if getattr(self, name) not in ("mlp", "cnn"):
-                raise ValueError(f"{name} must be 'mlp' or 'cnn', got {getattr(self, name)!r}.")
+        if self.encoder_kind not in ("mlp", "cnn", "keypoints", "frame_cnn"):
+            raise ValueError(f"encoder_kind must be 'mlp', 'cnn', 'keypoints' or 'frame_cnn', "
+                             f"got {self.encoder_kind!r}.")
+        if self.decoder_kind not in ("mlp", "cnn"):
+            raise ValueError(f"decoder_kind must be 'mlp' or 'cnn', got {self.decoder_kind!r}.")
         if self.transition_kind not in ("mlp", "e2c_linear"):
             raise ValueError(
                 f"transition_kind must be 'mlp' or 'e2c_linear', got {self.transition_kind!r}."
             )
-        if self.encoder_kind == "cnn" and not self.encoder_convs:
-            raise ValueError("encoder_kind='cnn' needs at least one ConvSpec in encoder_convs.")
+        if self.encoder_kind != "mlp" and not self.encoder_convs:
+            raise ValueError(f"encoder_kind={self.encoder_kind!r} needs at least one ConvSpec "
+                             f"in encoder_convs.")
         if self.decoder_kind == "cnn" and not self.decoder_convs:
             raise ValueError("decoder_kind='cnn' needs at least one ConvSpec in decoder_convs.")
         if self.encoder_downsample < 1 or self.decoder_output_upsample < 1:
@@ -145,6 +168,14 @@ class ModelConfig:
             raise ValueError(
                 "decoder_pixel_shuffle needs decoder_kind='cnn' and decoder_output_upsample >= 2."
             )
+        if not self.encoder_motion_gain >= 0.0:
+            raise ValueError(f"encoder_motion_gain must be >= 0, got {self.encoder_motion_gain}.")
+        if self.encoder_motion_gain and self.encoder_kind in ("keypoints", "frame_cnn"):
+            raise ValueError(f"encoder_kind={self.encoder_kind!r} takes each frame's motion "
+                             f"itself; leave encoder_motion_gain at 0.")
+        if self.encoder_frame_features < 1:
+            raise ValueError(f"encoder_frame_features must be >= 1, got "
+                             f"{self.encoder_frame_features}.")
         if self.amortized and self.transition_kind != "mlp":
             raise ValueError("amortized A/B heads only apply to transition_kind='mlp'.")
 

@@ -3,8 +3,8 @@
 Shapes: observations are uint8 ``(B, F, H, W)`` (``F`` frames, oldest first), converted to float
 in [0, 1] inside the networks; latent states ``z`` are ``(B, n_z)``; actions ``u`` ``(B, n_u)``.
 
-* Encoder E(z | x): backbone (MLP on the flattened image, or CNN) + a linear layer to the mean
-  and log-variance of a diagonal Gaussian.
+* Encoder E(z | x): backbone (MLP on the flattened image, CNN, or per-frame CNN keypoints)
+  + a linear layer to the mean and log-variance of a diagonal Gaussian.
 * Decoder D(x | z): backbone + logits of a Bernoulli per pixel, shaped like the observation.
 * Transition F(z' | z, u): either a Gaussian MLP whose mean has a skip connection
   (``mean = z + g(z, u)``), optionally with amortized Jacobian heads A (n_z x n_z) and
@@ -74,10 +74,11 @@ class _ImageInput(nn.Module):
     """
 
     def __init__(self, obs_shape: tuple[int, int, int], downsample: int,
-                 standardize: bool = False) -> None:
+                 standardize: bool = False, motion_gain: float = 0.0) -> None:
         super().__init__()
         self.downsample = downsample
         self.standardize = standardize
+        self.motion_gain = motion_gain
         if standardize:
             self.register_buffer("mean", torch.zeros(obs_shape))
             self.register_buffer("scale", torch.ones(obs_shape))
@@ -95,6 +96,9 @@ class _ImageInput(nn.Module):
             x = (x - self.mean) * self.scale
         if self.downsample > 1:
             x = F.avg_pool2d(x, self.downsample, ceil_mode=True)
+        if self.motion_gain and x.shape[1] > 1:  # older frames -> gain x (newest - them)
+            newest = x[:, -1:]
+            x = torch.cat([self.motion_gain * (newest - x[:, :-1]), newest], dim=1)
         return x
 
 
@@ -110,14 +114,94 @@ def _conv_stack(in_channels: int, convs: Sequence[ConvSpec]) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+#: Factor on the frame-to-frame motion of per-frame features (:class:`_PerFrameMotion`). A
+#: keypoint moves a few hundredths of its [-1, 1] range per step (CartPole's pole tip a fraction
+#: of a pixel of 80), so unscaled motions would reach the first hidden layer a hundred times
+#: weaker than the positions.
+MOTION_SCALE = 20.0
+
+
+class _PerFrameMotion(nn.Module):
+    """Frames -> features of each frame alone (shared weights) -> newest features and motion.
+
+    The output is the newest frame's features followed by ``MOTION_SCALE`` times each later
+    frame's features minus the frame's before. Subclasses define :meth:`per_frame`.
+    """
+
+    def per_frame(self, frames: torch.Tensor) -> torch.Tensor:
+        """``(N, 1, H, W)`` single frames -> ``(N, D)`` features."""
+        raise NotImplementedError
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, F, H, W)`` float images -> ``(B, D F)`` features."""
+        batch, frames, height, width = x.shape
+        features = self.per_frame(x.reshape(batch * frames, 1, height, width))
+        features = features.reshape(batch, frames, -1)
+        motion = (features[:, 1:] - features[:, :-1]) * MOTION_SCALE
+        return torch.cat([features[:, -1], motion.flatten(1)], dim=1)
+
+
+class _Keypoints(_PerFrameMotion):
+    """Per-frame keypoints by spatial soft-argmax (``encoder_kind="keypoints"``).
+
+    The convolutions run on every frame alone; the last one's ``K`` channels are heatmaps, and
+    each heatmap's softmax-weighted mean pixel position (in [-1, 1], with a learned temperature
+    per heatmap) is a keypoint: ``2K`` features per frame.
+    """
+
+    def __init__(self, convs: Sequence[ConvSpec]) -> None:
+        super().__init__()
+        *hidden, last = convs
+        self.features = _conv_stack(1, hidden)
+        self.heatmaps = nn.Conv2d(hidden[-1].channels if hidden else 1, last.channels,
+                                  last.kernel_size, last.stride, padding=last.kernel_size // 2)
+        self.log_temperature = nn.Parameter(torch.zeros(last.channels))
+
+    def per_frame(self, frames: torch.Tensor) -> torch.Tensor:
+        maps = self.heatmaps(self.features(frames))
+        rows, cols = maps.shape[-2:]
+        weights = torch.softmax(
+            maps.flatten(2) * torch.exp(-self.log_temperature)[:, None], dim=-1
+        ).view(len(frames), -1, rows, cols)
+        ys = torch.linspace(-1.0, 1.0, rows, device=frames.device, dtype=weights.dtype)
+        xs = torch.linspace(-1.0, 1.0, cols, device=frames.device, dtype=weights.dtype)
+        points = torch.stack([(weights.sum(2) * xs).sum(-1), (weights.sum(3) * ys).sum(-1)], -1)
+        return points.flatten(1)
+
+
+class _FrameEmbedding(_PerFrameMotion):
+    """Per-frame CNN embedding (``encoder_kind="frame_cnn"``).
+
+    Convolutions, then a linear map to ``width`` features (no ReLU, so that small motions
+    change them smoothly).
+    """
+
+    def __init__(self, frame_shape: tuple[int, int], convs: Sequence[ConvSpec],
+                 width: int) -> None:
+        super().__init__()
+        self.convs = nn.Sequential(_conv_stack(1, convs), nn.Flatten())
+        with torch.no_grad():
+            flat = self.convs(torch.zeros(1, 1, *frame_shape)).shape[1]
+        self.linear = nn.Linear(flat, width)
+
+    def per_frame(self, frames: torch.Tensor) -> torch.Tensor:
+        return self.linear(self.convs(frames))
+
+
 def _image_backbone(
     obs_shape: tuple[int, int, int], kind: str, convs: Sequence[ConvSpec],
     hidden: Sequence[int], downsample: int, standardize: bool = False,
+    motion_gain: float = 0.0, frame_features: int = 0,
 ) -> tuple[nn.Sequential, int]:
     """Image -> features; returns the module and its output width (found by a dummy pass)."""
-    layers: list[nn.Module] = [_ImageInput(obs_shape, downsample, standardize)]
+    layers: list[nn.Module] = [_ImageInput(obs_shape, downsample, standardize, motion_gain)]
     if kind == "cnn":
         layers.append(_conv_stack(obs_shape[0], convs))
+    elif kind == "keypoints":
+        layers.append(_Keypoints(convs))
+    elif kind == "frame_cnn":
+        frame_shape = (math.ceil(obs_shape[1] / downsample), math.ceil(obs_shape[2] / downsample))
+        layers.append(_FrameEmbedding(frame_shape, convs, frame_features))
     layers.append(nn.Flatten())
     trunk = nn.Sequential(*layers)
     with torch.no_grad():
@@ -135,6 +219,7 @@ class GaussianEncoder(nn.Module):
         self.backbone, width = _image_backbone(
             obs_shape, config.encoder_kind, config.encoder_convs, config.encoder_hidden,
             config.encoder_downsample, config.input_standardization,
+            config.encoder_motion_gain, config.encoder_frame_features,
         )
         self.head = nn.Linear(width, 2 * config.latent_dim)
         self.min_logvar, self.max_logvar = config.min_logvar, config.max_logvar

@@ -193,3 +193,62 @@ def test_pixel_shuffle_output_bias_starts_from_each_frames_mean():
     second = torch.logit(torch.tensor(1e-3))
     bias = model.decoder.convs[-1].bias
     torch.testing.assert_close(bias, torch.cat([first.repeat(16), second.repeat(16)]))
+
+
+def test_keypoints_locate_a_dot_and_its_motion_between_frames():
+    """With a sharp heatmap of the image itself, the soft-argmax is the dot's position and the
+    motion features are the scaled shift between the two frames."""
+    from pcc_agent.config import ConvSpec
+    from pcc_agent.networks import MOTION_SCALE, _Keypoints
+
+    keypoints = _Keypoints((ConvSpec(1, 1, 1),))
+    with torch.no_grad():  # heatmap = 50 x image: a softmax close to a one-hot at the dot
+        keypoints.heatmaps.weight.fill_(50.0)
+        keypoints.heatmaps.bias.zero_()
+    images = torch.zeros(1, 2, 21, 21)
+    images[0, 0, 10, 5] = 1.0   # oldest frame: row 10, column 5
+    images[0, 1, 4, 15] = 1.0   # newest frame: row 4, column 15
+    out = keypoints(images)
+    assert out.shape == (1, 4)  # newest (x, y), then the motion (dx, dy)
+    newest = torch.tensor([15 / 10 - 1, 4 / 10 - 1])
+    oldest = torch.tensor([5 / 10 - 1, 10 / 10 - 1])
+    torch.testing.assert_close(out[0, :2], newest, atol=1e-4, rtol=0)
+    torch.testing.assert_close(out[0, 2:], MOTION_SCALE * (newest - oldest),
+                               atol=1e-3, rtol=0)
+
+
+@pytest.mark.parametrize("kind", ["keypoints", "frame_cnn"])
+def test_per_frame_encoders_are_a_model_config_choice(kind):
+    from pcc_agent.config import ConvSpec
+
+    config = dataclasses.replace(
+        get_preset("pcc/CartPole-v0", "fast").model, encoder_kind=kind,
+        encoder_convs=(ConvSpec(8, 5, 2), ConvSpec(6, 1, 1)), encoder_frame_features=5)
+    model = EmbeddingModel(OBS_SHAPES["pcc/CartPole-v0"], 1, config, seed=0)
+    obs = torch.randint(0, 256, (3, *OBS_SHAPES["pcc/CartPole-v0"]), dtype=torch.uint8)
+    mean, logvar = model.encode(obs)
+    assert mean.shape == logvar.shape == (3, 8)
+    trunk = model.encoder.backbone[0]
+    still = trunk(obs[:, -1:].repeat(1, 2, 1, 1))  # both frames the same: no motion
+    width = still.shape[1] // 2
+    assert width == (12 if kind == "keypoints" else 5)  # 6 keypoints (x, y); 5 features
+    assert torch.count_nonzero(still[:, width:]) == 0
+    assert torch.count_nonzero(trunk(obs)[:, width:]) > 0
+    assert ModelConfig.from_dict(config.to_dict()) == config
+    with pytest.raises(ValueError, match=f"'{kind}' needs at least one ConvSpec"):
+        dataclasses.replace(config, encoder_convs=())
+    with pytest.raises(ValueError, match="leave encoder_motion_gain at 0"):
+        dataclasses.replace(config, encoder_motion_gain=5.0)
+    with pytest.raises(ValueError, match="encoder_kind must be 'mlp', 'cnn', 'keypoints' or"):
+        dataclasses.replace(config, encoder_kind="resnet")
+
+
+def test_motion_gain_shows_the_encoder_the_change_between_frames():
+    from pcc_agent.networks import _ImageInput
+
+    frames = torch.rand(2, 2, 6, 6)
+    shown = _ImageInput((2, 6, 6), downsample=1, motion_gain=10.0)(frames)
+    torch.testing.assert_close(shown[:, 1], frames[:, 1])
+    torch.testing.assert_close(shown[:, 0], 10.0 * (frames[:, 1] - frames[:, 0]))
+    with pytest.raises(ValueError, match="encoder_motion_gain must be >= 0"):
+        dataclasses.replace(SMALL, encoder_motion_gain=-1.0)
