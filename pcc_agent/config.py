@@ -493,10 +493,11 @@ class EnvPreset:
 
 @dataclass(frozen=True)
 class DomainPresets:
-    """One row of the presets table: everything about one domain, both variants.
+    """One row of the presets table: everything about one domain, all its variants.
 
     The ``"paper"`` variant is ``(model, train)``, the ``"fast"`` variant
-    ``(fast_model, fast_train)``; both share the data size and the planner.
+    ``(fast_model, fast_train)``, the ``"motion"`` variant (CNN domains)
+    ``(motion_model, fast_train)``; all share the data size and the planner.
 
     Attributes:
         obs_shape: Observation shape ``(frames, H, W)`` of the registered env.
@@ -506,7 +507,9 @@ class DomainPresets:
         fast_model: The ``"fast"`` variant's architecture.
         train: The paper's training recipe.
         fast_train: The ``"fast"`` variant's training recipe.
-        planner: Latent iLQR / MPC settings (both variants).
+        planner: Latent iLQR / MPC settings (every variant).
+        motion_model: The ``"motion"`` variant's architecture (trained with ``fast_train``),
+            on the CNN domains only: a CNN that sees each frame's motion.
     """
 
     obs_shape: tuple[int, int, int]
@@ -517,11 +520,19 @@ class DomainPresets:
     train: TrainConfig
     fast_train: TrainConfig
     planner: PlannerConfig
+    motion_model: ModelConfig | None = None
 
     def variants(self, env_id: str) -> dict[str, EnvPreset]:
-        """The row's presets by variant name: ``{"paper": ..., "fast": ...}``."""
+        """The row's presets by variant name.
+
+        ``"paper"``, ``"fast"`` and, where the row has a ``motion_model``, ``"motion"``.
+        """
         data = DataConfig(num_samples=self.num_samples)
-        return {
+        found = {
             "paper": EnvPreset(env_id, self.model, self.train, data, self.planner),
             "fast": EnvPreset(env_id, self.fast_model, self.fast_train, data, self.planner),
         }
+        if self.motion_model is not None:
+            found["motion"] = EnvPreset(env_id, self.motion_model, self.fast_train, data,
+                                        self.planner)
+        return found
