@@ -59,6 +59,7 @@ __all__ = [
     "PlannerConfig",
     "TrainConfig",
     "TransitionKind",
+    "VARIANTS",
     "default_preset_for_spaces",
     "get_preset",
 ]
@@ -269,6 +270,10 @@ DOMAINS: dict[str, DomainPresets] = {
         planner=PlannerConfig(plan_length=20, kappa=10.0, **_PC3_CANDIDATES),
     ),
 }
+
+#: Every preset variant name: ``"paper"`` and ``"fast"`` for every domain, ``"motion"`` for the
+#: CNN domains (CartPole, the arms, lane keeping).
+VARIANTS: tuple[str, ...] = ("paper", "fast", "motion")
 
 #: ``PRESETS[env_id][variant]``: every registered environment, variants ``"paper"``, ``"fast"``.
 PRESETS: dict[str, dict[str, EnvPreset]] = {

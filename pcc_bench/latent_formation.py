@@ -26,7 +26,7 @@ import torch
 
 from pcc_agent.io import atomic_write_text
 from pcc_agent.model import EmbeddingModel
-from pcc_agent.presets import get_preset
+from pcc_agent.presets import VARIANTS, get_preset
 from pcc_agent.training import train_embedding
 from pcc_bench.arguments import command_parser
 
@@ -66,7 +66,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = command_parser(__doc__, "pcc_bench.latent_formation")
     parser.add_argument("--epochs", type=int, default=60)
     parser.add_argument("--every", type=int, default=5)
-    parser.add_argument("--variant", default="paper", choices=["paper", "fast"])
+    parser.add_argument("--variant", default="paper", choices=VARIANTS)
     parser.add_argument("--model", nargs="*", default=[], help="ModelConfig overrides key=value")
     parser.add_argument("--train", nargs="*", default=[], help="TrainConfig overrides key=value")
     parser.add_argument("--seed", type=int, default=0, help="data and model seed")

@@ -30,6 +30,7 @@ from typing import Any
 import torch
 
 from pcc_agent.io import atomic_write_json, versions
+from pcc_agent.presets import VARIANTS
 from pcc_bench.arguments import command_parser
 from pcc_bench.presets import REPRODUCE_PRESETS
 
@@ -39,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = command_parser(__doc__, "pcc_bench.long_training")
     parser.add_argument("--env", default="pcc/Planar-v0")
     parser.add_argument("--method", default="pcc")
-    parser.add_argument("--variant", default="fast", choices=["paper", "fast"],
+    parser.add_argument("--variant", default="fast", choices=VARIANTS,
                         help="Preset variant (the grid's 'paper' or 'paper-fast' recipe).")
     parser.add_argument("--seed", type=int, default=0, help="Data, model and training seed.")
     parser.add_argument("--epochs", type=int, default=1000)

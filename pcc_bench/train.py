@@ -34,6 +34,7 @@ def default_output(env_id: str, method: str, seed: int) -> Path:
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
     from pcc_agent.losses import METHODS
+    from pcc_agent.presets import VARIANTS
 
     parser = command_parser(__doc__, "pcc_bench.train")
     parser.add_argument("--env", default="pcc/Planar-v0", metavar="ENV_ID",
@@ -41,9 +42,10 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{', '.join(known_envs())}).")
     parser.add_argument("--method", default="pcc", choices=sorted(METHODS),
                         help="The embedding objective (default: %(default)s).")
-    parser.add_argument("--variant", default="fast", choices=("paper", "fast"),
-                        help="Preset variant: 'paper' (the paper's networks) or 'fast' "
-                        "(CPU-friendly; default).")
+    parser.add_argument("--variant", default="fast", choices=VARIANTS,
+                        help="Preset variant: 'paper' (the paper's networks), 'fast' "
+                        "(CPU-friendly; default) or 'motion' (the CNN domains' CPU CNN "
+                        "seeing each frame's motion).")
     parser.add_argument("--seed", type=int, default=0, help="Seed of data, weights, batches.")
     parser.add_argument("--samples", type=positive_int, default=None,
                         help="Transitions in the data set (default: the preset's).")

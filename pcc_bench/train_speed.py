@@ -39,7 +39,7 @@ import torch
 from pcc_agent.io import atomic_write_text
 from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
-from pcc_agent.presets import ACTION_DIMS, OBS_SHAPES, PRESETS, get_preset
+from pcc_agent.presets import ACTION_DIMS, OBS_SHAPES, PRESETS, VARIANTS, get_preset
 from pcc_agent.training import TransitionArrays, resolve_device, train_embedding
 from pcc_bench.arguments import command_parser
 from pcc_bench.paths import COMMITTED_RESULTS_DIR
@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser = command_parser(__doc__, "pcc_bench.train_speed")
     parser.add_argument("--envs", nargs="+", default=[PLANAR],
                         help=f"env ids or 'all' (known: {', '.join(PRESETS)})")
-    parser.add_argument("--variants", nargs="+", default=["paper"], choices=["paper", "fast"])
+    parser.add_argument("--variants", nargs="+", default=["paper"], choices=VARIANTS)
     parser.add_argument("--methods", nargs="+", default=["pcc"], choices=sorted(METHODS))
     parser.add_argument("--epochs", type=int, default=3, help="timed epochs (plus one warm-up)")
     parser.add_argument("--max-samples", type=int, default=0,
