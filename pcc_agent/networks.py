@@ -3,8 +3,9 @@
 Shapes: observations are uint8 ``(B, F, H, W)`` (``F`` frames, oldest first), converted to float
 in [0, 1] inside the networks; latent states ``z`` are ``(B, n_z)``; actions ``u`` ``(B, n_u)``.
 
-* Encoder E(z | x): backbone (MLP on the flattened image, CNN, or per-frame CNN keypoints)
-  + a linear layer to the mean and log-variance of a diagonal Gaussian.
+* Encoder E(z | x): backbone (MLP on the flattened image, CNN, or a CNN on each frame alone
+  whose keypoints or features and their change between frames go on) + a linear layer to the
+  mean and log-variance of a diagonal Gaussian.
 * Decoder D(x | z): backbone + logits of a Bernoulli per pixel, shaped like the observation.
 * Transition F(z' | z, u): either a Gaussian MLP whose mean has a skip connection
   (``mean = z + g(z, u)``), optionally with amortized Jacobian heads A (n_z x n_z) and
