@@ -13,6 +13,9 @@ variants:
   the paper's networks and objective but trains them with per-pixel input standardization and
   a 20-epoch KL warm-up (its latent space forms several times sooner); Pendulum's equals
   ``"paper"``.
+* ``"motion"`` (CartPole, the arms, lane keeping): the ``"fast"`` CNN run on each frame alone,
+  seeing its features' change between the frames, with a decoder that gives every pixel its
+  own logit (:func:`_motion_cnn_model`; not the paper's).
 
 :data:`PRESETS`, :data:`OBS_SHAPES` and :data:`ACTION_DIMS` are read off the table;
 :func:`get_preset` looks a preset up and :func:`default_preset_for_spaces` makes one for an

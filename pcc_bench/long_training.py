@@ -41,7 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--env", default="pcc/Planar-v0")
     parser.add_argument("--method", default="pcc")
     parser.add_argument("--variant", default="fast", choices=VARIANTS,
-                        help="Preset variant (the grid's 'paper' or 'paper-fast' recipe).")
+                        help="Preset variant (the grid's 'paper', 'paper-fast' or 'paper-motion' "
+                        "recipe).")
     parser.add_argument("--seed", type=int, default=0, help="Data, model and training seed.")
     parser.add_argument("--epochs", type=int, default=1000)
     parser.add_argument("--eval-at", type=int, nargs="+", default=[150, 250, 500, 750, 1000],
