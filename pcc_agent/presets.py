@@ -142,14 +142,12 @@ def _motion_cnn_model(latent_dim: int, hidden: int, backward: int) -> ModelConfi
     epochs) and no model balanced; with this encoder the pole's rate reached R^2 0.52 after 25
     epochs (``RESULTS_LOG.md``, 2026-12-06, second session).
     """
-    frames = 2
-    upsample = 4
-    return dataclasses.replace(
-        _fast_cnn_model(latent_dim, hidden, backward),
-        encoder_kind="frame_cnn",
-        decoder_pixel_shuffle=True,
-        decoder_convs=(ConvSpec(16, 3, 1), ConvSpec(frames * upsample**2, 3, 1)),
-    )
+    fast = _fast_cnn_model(latent_dim, hidden, backward)
+    *hidden_convs, last = fast.decoder_convs  # last: one channel per frame
+    shuffled = ConvSpec(last.channels * fast.decoder_output_upsample**2, last.kernel_size,
+                        last.stride)
+    return dataclasses.replace(fast, encoder_kind="frame_cnn", decoder_pixel_shuffle=True,
+                               decoder_convs=(*hidden_convs, shuffled))
 
 
 _PLANAR_MODEL = ModelConfig(
@@ -274,14 +272,16 @@ DOMAINS: dict[str, DomainPresets] = {
     ),
 }
 
-#: Every preset variant name: ``"paper"`` and ``"fast"`` for every domain, ``"motion"`` for the
-#: CNN domains (CartPole, the arms, lane keeping).
-VARIANTS: tuple[str, ...] = ("paper", "fast", "motion")
-
 #: ``PRESETS[env_id][variant]``: every registered environment, variants ``"paper"``, ``"fast"``.
 PRESETS: dict[str, dict[str, EnvPreset]] = {
     env_id: row.variants(env_id) for env_id, row in DOMAINS.items()
 }
+
+#: Every preset variant name: ``"paper"`` and ``"fast"`` for every domain, ``"motion"`` for the
+#: CNN domains (CartPole, the arms, lane keeping).
+VARIANTS: tuple[str, ...] = tuple(dict.fromkeys(
+    name for row in PRESETS.values() for name in row))
+
 #: Observation shapes of the registered environments.
 OBS_SHAPES: dict[str, tuple[int, int, int]] = {k: r.obs_shape for k, r in DOMAINS.items()}
 #: Action dimensions of the registered environments.
