@@ -15,6 +15,11 @@ best source there is:
 4. ``epoch cap``: the seconds per epoch of ``train_speed.json`` (committed results, one
    thread) or a conservative guess per sample, times the epoch cap.
 
+A run that resumes a training checkpoint (``pcc reproduce`` keeps one every few epochs) is
+charged only for the epochs it has left to its cap, at the checkpoint's own seconds per epoch
+(``checkpoint``; the estimate's other sources where the checkpoint has no epoch times, scaled
+by the share of the cap left).
+
 Among the records of a source, those measured on this machine (the same CPU) are used when
 there are at least :data:`MIN_THIS_MACHINE`; else those not known to come from another
 machine (older records name only the core count), else all. The upper duration trains to the
@@ -51,6 +56,8 @@ BASIS_TEXT = {
     "epoch cap": "the epoch cap at train_speed.json's seconds per epoch or a guess (no "
                  "finished run of their kind)",
     "reference guess": "a guess (no finished run of that reference controller)",
+    "checkpoint": "their training checkpoint's seconds per epoch, for the epochs left to the "
+                  "cap",
 }
 
 
@@ -274,6 +281,7 @@ def _expected_epochs(spec: RunSpec, timed: list[_Timed]) -> float:
 def estimate_cost(
     runs: Sequence[RunSpec], finished: Iterable[dict[str, Any]] = (),
     machine: dict[str, Any] | None = None,
+    resumed: dict[RunSpec, CheckpointedTraining] | None = None,
 ) -> CostEstimate:
     """Expected and upper durations of ``runs`` (one core each), see the module docstring.
 
@@ -283,7 +291,9 @@ def estimate_cost(
             a record came from).
         machine: This machine (:func:`pcc_bench.records.machine_info`); records measured on
             it are preferred. None: no preference.
+        resumed: The runs that resume a training checkpoint (:func:`checkpointed_trainings`).
     """
+    resumed = resumed or {}
     measured = _train_speeds()
     timed = _timed(finished, machine)
     by_kind: dict[tuple[Any, ...], list[_Timed]] = {}
@@ -335,6 +345,14 @@ def estimate_cost(
             used, where = [], ""
             basis = "reference guess" if reference else "epoch cap"
             run_expected = run_upper = guess
+        checkpoint = resumed.get(spec)
+        if checkpoint is not None and cap:  # only the epochs left to the cap
+            left = max(cap - checkpoint.epochs, 0)
+            if checkpoint.seconds_per_epoch is not None:
+                used, basis = [], "checkpoint"
+                run_expected = run_upper = left * checkpoint.seconds_per_epoch
+            else:
+                run_expected, run_upper = run_expected * left / cap, run_upper * left / cap
         expected.append(run_expected)
         upper.append(max(run_upper, run_expected))
         bases.append(f"{basis}, {where}" if used and machine is not None else basis)
@@ -344,6 +362,41 @@ def estimate_cost(
         sum(b.split(", ")[0] in ("same kind", "same model", "other methods") for b in bases),
         tuple(expected), tuple(upper), tuple(bases), tuple(sorted(sources)),
     )
+
+
+@dataclass(frozen=True)
+class CheckpointedTraining:
+    """How far a run's training checkpoint got: epochs trained and their mean seconds."""
+
+    epochs: int
+    seconds_per_epoch: float | None
+
+
+def checkpointed_trainings(results_dir: Path, runs: Iterable[RunSpec]
+                           ) -> dict[RunSpec, CheckpointedTraining]:
+    """The runs of ``runs`` that resume a training checkpoint, and how far each got.
+
+    An unreadable checkpoint counts as none (the run trains afresh).
+    """
+    from pcc_agent.checkpoint import CheckpointError, load_checkpoint
+    from pcc_bench.records import training_checkpoint_path
+
+    found = {}
+    for spec in runs:
+        path = training_checkpoint_path(results_dir, spec)
+        if not path.exists():
+            continue
+        try:
+            extra = load_checkpoint(path).extra
+            epochs = int(extra.get("epochs", 0))
+            seconds = [float(row["time/epoch_seconds"]) for row in extra.get("history") or []
+                       if "time/epoch_seconds" in row]
+        except (CheckpointError, TypeError, ValueError, KeyError):
+            continue
+        if epochs > 0:
+            found[spec] = CheckpointedTraining(
+                epochs, float(np.mean(seconds)) if seconds else None)
+    return found
 
 
 def load_timing_records(directories: Iterable[Path]) -> list[dict[str, Any]]:
@@ -421,7 +474,11 @@ def status_lines(
     if not pending:
         return [head + "."]
     finished = load_timing_records(timing_directories(results_dir))
-    cost = estimate_cost(pending, finished, machine_info())
+    resumed = checkpointed_trainings(results_dir, pending)
+    cost = estimate_cost(pending, finished, machine_info(), resumed)
+    if resumed:
+        head += (f" ({len(resumed)} resume{'s' if len(resumed) == 1 else ''} a training "
+                 f"checkpoint, {sum(c.epochs for c in resumed.values())} epochs done)")
     if backend == "ray":
         return [
             f"{head}: about {cost.expected_seconds / 3600:,.1f} core-hours, at most "

@@ -14,7 +14,7 @@ import pytest
 
 from pcc_agent.planning import PLANNER_REVISION
 from pcc_bench.aggregation import aggregate, interquartile_mean
-from pcc_bench.costs import estimate_cost
+from pcc_bench.costs import CheckpointedTraining, checkpointed_trainings, estimate_cost
 from pcc_bench.records import RunSpec, load_finished_run
 from pcc_bench.runs import execute_run, report_line
 
@@ -114,6 +114,9 @@ def test_run_killed_mid_training_resumes_to_the_uninterrupted_result(tmp_path):
     assert load_finished_run(path, spec) is None
     assert "seed=3: training, epoch " in training_progress(tmp_path, spec)
     assert "of at most 40, best validation loss" in training_progress(tmp_path, spec)
+    checkpointed = checkpointed_trainings(tmp_path, [spec, dataclasses.replace(spec, seed=4)])
+    assert list(checkpointed) == [spec] and 0 < checkpointed[spec].epochs < 40
+    assert checkpointed[spec].seconds_per_epoch > 0
     resumed = execute_run(spec, tmp_path, str(data_dir))
     assert not resumed.get("skipped") and load_finished_run(path, spec) is not None
     assert "seed=3: done, " in training_progress(tmp_path, spec)
@@ -380,6 +383,16 @@ def test_cost_estimate_uses_finished_runs_of_the_same_kind():
     # Another epoch budget is another kind: no record applies.
     longer = dataclasses.replace(pcc, max_epochs=2)
     assert estimate_cost([longer], finished).runs_from_records == 0
+
+
+def test_cost_estimate_charges_a_resumed_run_only_the_epochs_left():
+    spec = dataclasses.replace(tiny_spec(9), max_epochs=100)
+    fresh = estimate_cost([spec]).run_seconds[0]
+    resumed = estimate_cost([spec], resumed={spec: CheckpointedTraining(30, 2.0)})
+    assert resumed.run_seconds == (70 * 2.0,) and resumed.bases == ("checkpoint",)
+    # Without epoch times in the checkpoint: the other estimate, scaled to the epochs left.
+    untimed = estimate_cost([spec], resumed={spec: CheckpointedTraining(30, None)})
+    assert np.isclose(untimed.run_seconds[0], fresh * 0.7)
 
 
 def _sleepy_run(spec: RunSpec, marker_dir: str | Path, seconds: float = 0.3) -> dict:
