@@ -69,6 +69,7 @@ ORACLE_CONFIGS: dict[str, OracleConfig] = {
     "pcc/PendulumBalance-v0": OracleConfig(state_weights=(1.0, 0.1)),
     # Pole angle, pole rate, cart position, cart velocity.
     "pcc/CartPole-v0": OracleConfig(state_weights=(1.0, 0.1, 0.1, 0.01)),
+    "pcc/CartPole-v1": OracleConfig(state_weights=(1.0, 0.1, 0.1, 0.01)),
     # Joint angles, then joint rates. Rate weight 0.01 against 0.1: 93.5% vs 87.2% (2-link),
     # 91.5% vs 89.0% (3-link) at T = 60; a heavy rate weight slows the pumping swing-up.
     "pcc/TwoLink-v0": OracleConfig(state_weights=(1.0, 1.0, 0.01, 0.01)),

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from pcc_agent.io import atomic_write_json, atomic_write_text
-from pcc_bench.arguments import command_parser
+from pcc_bench.arguments import command_parser, known_envs
 from pcc_bench.paths import COMMITTED_RESULTS_DIR
 from pcc_bench.presets import ALL_ENVS, REPRODUCE_PRESETS
 from pcc_bench.zero_action import (  # noqa: F401 - re-exported: the floor's policy
@@ -62,7 +62,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from pcc_agent.evaluation import format_mean_se
 
     parser = command_parser(__doc__, "pcc_bench.no_action_floor")
-    parser.add_argument("--envs", nargs="+", default=list(ALL_ENVS), choices=ALL_ENVS)
+    parser.add_argument("--envs", nargs="+", default=list(ALL_ENVS), choices=known_envs(),
+                        metavar="ENV")
     parser.add_argument("--preset", default="paper", choices=sorted(REPRODUCE_PRESETS),
                         help="Reproduction preset whose tasks (number, seed) are used.")
     parser.add_argument("--noise", type=float, default=0.0, help="Process noise std.")

@@ -21,10 +21,12 @@ __all__ = [
     "ReproducePreset",
 ]
 
+#: The paper's Table 1 domains. CartPole is v1, the paper authors' picture (a 52-pixel pole);
+#: the committed CartPole rows before 2026-12-06 (third session) are v0 (the pole to scale).
 ALL_ENVS: tuple[str, ...] = (
     "pcc/Planar-v0",
     "pcc/PendulumSwingUp-v0",
-    "pcc/CartPole-v0",
+    "pcc/CartPole-v1",
     "pcc/ThreeLink-v0",
     "pcc/LaneKeeping-v0",
 )
@@ -50,6 +52,7 @@ TASK_STARTS: dict[str, str] = {
     "pcc/PendulumSwingUp-v0": "hanging at rest (pi, 0)",
     "pcc/PendulumBalance-v0": "angle U(-pi/6, pi/6), at rest",
     "pcc/CartPole-v0": "pole angle U(-pi/6, pi/6), rest 0",
+    "pcc/CartPole-v1": "pole angle U(-pi/6, pi/6), rest 0",
     "pcc/TwoLink-v0": "(pi, pi/2) at rest",
     "pcc/ThreeLink-v0": "(pi, 2pi/3, pi/3) at rest",
     "pcc/LaneKeeping-v0": "20 forced full-left or full-right steps from the centre",
@@ -234,7 +237,7 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
     # code never held CartPole's rates; judged on state R^2 and validation tasks.
     "paper-motion": _PAPER.replace(
         name="paper-motion", model_variant="motion",
-        envs=("pcc/CartPole-v0", "pcc/TwoLink-v0", "pcc/ThreeLink-v0", "pcc/LaneKeeping-v0")),
+        envs=("pcc/CartPole-v1", "pcc/TwoLink-v0", "pcc/ThreeLink-v0", "pcc/LaneKeeping-v0")),
     # The same protocol with the CPU-friendly CNNs for CartPole, the arms and LaneKeeping.
     "paper-fast": _PAPER_FAST,
     # "paper-fast" with a longer early-stopping criterion: 100 epochs without improvement, at
@@ -260,7 +263,7 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
     # Table 3: noisy dynamics, noise variance 1 for every domain and also 2 for Planar.
     "paper-noisy": ReproducePreset(
         name="paper-noisy",
-        envs=("pcc/Planar-v0", "pcc/PendulumSwingUp-v0", "pcc/CartPole-v0", "pcc/ThreeLink-v0"),
+        envs=("pcc/Planar-v0", "pcc/PendulumSwingUp-v0", "pcc/CartPole-v1", "pcc/ThreeLink-v0"),
         methods=("e2c", "rce", "pcc"),
         num_models=10,
         num_tasks=10,
@@ -321,3 +324,8 @@ PAPER_RESULTS: _T = {
     ("pcc/ThreeLink-v0", "e2c", 1.0): {"all": (0.0, 0.0), "top1": (0.0, 0.0)},
     ("pcc/ThreeLink-v0", "pcc", 1.0): {"all": (0.5, 0.1), "top1": (1.8, 0.3)},
 }
+# The paper's cart-pole is both of ours: pcc/CartPole-v1 draws its authors' picture, v0 one to
+# scale (pcc_envs.cartpole).
+PAPER_RESULTS.update({("pcc/CartPole-v1", method, noise): row
+                      for (env, method, noise), row in list(PAPER_RESULTS.items())
+                      if env == "pcc/CartPole-v0"})

@@ -6,9 +6,15 @@ import numpy as np
 
 from pcc_envs.core import ImageControlEnv, wrap_angle
 from pcc_envs.physics import CartPoleParams, cartpole_xdot
-from pcc_envs.rendering import CartPoleView, render_cartpole
+from pcc_envs.rendering import SCHEMATIC_CARTPOLE_VIEW, CartPoleView, render_cartpole
 
-__all__ = ["CartPoleEnv"]
+__all__ = ["PICTURES", "CartPoleEnv"]
+
+#: The cart-pole pictures, by name (the env's ``picture`` argument).
+PICTURES: dict[str, CartPoleView] = {
+    "physical": CartPoleView(),
+    "schematic": SCHEMATIC_CARTPOLE_VIEW,
+}
 
 GOAL_ANGLE = np.pi / 10
 """Success when ``|theta| <= pi / 10`` with the cart on the track."""
@@ -23,7 +29,7 @@ SAMPLER_VELOCITY = 3.0
 
 
 class CartPoleEnv(ImageControlEnv):
-    r"""Balance a pole on a cart from pixels (``pcc/CartPole-v0``).
+    r"""Balance a pole on a cart from pixels (``pcc/CartPole-v0``, ``pcc/CartPole-v1``).
 
     ## Description
     A uniform pole (0.1 kg, half-length 0.5 m) is hinged on a cart (1.0 kg) that moves without
@@ -38,9 +44,17 @@ class CartPoleEnv(ImageControlEnv):
     N (default 10 N).
 
     ## Observation Space
-    ``Box(0, 255, (2, 80, 80), uint8)``: previous and current frame from a fixed camera, 15
-    pixels per metre: a 7 x 5 pixel cart whose centre moves across columns 4..76 and a 15
-    pixel pole (:func:`pcc_envs.rendering.render_cartpole`).
+    ``Box(0, 255, (2, 80, 80), uint8)``: previous and current frame from a fixed camera
+    (:func:`pcc_envs.rendering.render_cartpole`). Two pictures (``picture``):
+
+    * ``"physical"`` (``pcc/CartPole-v0``): everything to one scale, 15 pixels per metre: a
+      7 x 5 pixel cart whose centre moves across columns 4..76 and a 15-pixel pole 2.5 pixels
+      wide.
+    * ``"schematic"`` (``pcc/CartPole-v1``): the PCC authors' picture: a 52-pixel pole 6
+      pixels wide (0.65 of the frame) on a 16 x 8 pixel cart whose centre moves across
+      columns 8..72. The paper gives only the frame size; its authors' code draws this.
+      Near upright the pole's tip moves 3.5 times as far per step as in the physical
+      picture, so the pole's rate shows in two frames.
 
     ## Rewards
     Dense (default): ``-(theta^2 + 0.1 theta_dot^2 + 0.1 x^2 + 0.01 x_dot^2)`` with ``theta``
@@ -64,7 +78,8 @@ class CartPoleEnv(ImageControlEnv):
     episode (it just stays out of the goal). Truncation after 200 steps.
 
     ## Arguments
-    ``max_force`` (N), ``noise_std``, ``reward_type``, ``render_mode``.
+    ``max_force`` (N), ``noise_std``, ``reward_type``, ``render_mode``, ``picture``
+    (``"physical"`` or ``"schematic"``).
 
     >>> import gymnasium as gym
     >>> import pcc_envs  # noqa: F401
@@ -91,11 +106,15 @@ class CartPoleEnv(ImageControlEnv):
         noise_std: float = 0.0,
         reward_type: str = "dense",
         render_mode: str | None = None,
+        picture: str = "physical",
     ) -> None:
         if not max_force > 0:
             raise ValueError(f"max_force must be > 0 N, got {max_force!r}")
+        if picture not in PICTURES:
+            raise ValueError(f"picture must be one of {sorted(PICTURES)}, got {picture!r}")
         self.params = CartPoleParams(max_force=float(max_force))
-        self.view = CartPoleView()
+        self.picture = picture
+        self.view = PICTURES[picture]
         self.action_scale = (self.params.max_force,)
         limit = self.params.track_limit
         self.state_low = np.array([-SAMPLER_ANGLE, -SAMPLER_OMEGA, -limit, -SAMPLER_VELOCITY])

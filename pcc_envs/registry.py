@@ -25,6 +25,7 @@ ENV_TABLE: tuple[EnvRow, ...] = (
     EnvRow("pcc/PendulumSwingUp-v0", "pcc_envs.pendulum:PendulumEnv", 400, {"task": "swingup"}),
     EnvRow("pcc/PendulumBalance-v0", "pcc_envs.pendulum:PendulumEnv", 400, {"task": "balance"}),
     EnvRow("pcc/CartPole-v0", "pcc_envs.cartpole:CartPoleEnv", 200),
+    EnvRow("pcc/CartPole-v1", "pcc_envs.cartpole:CartPoleEnv", 200, {"picture": "schematic"}),
     EnvRow("pcc/TwoLink-v0", "pcc_envs.manipulator:ManipulatorEnv", 400, {"num_links": 2}),
     EnvRow("pcc/ThreeLink-v0", "pcc_envs.manipulator:ManipulatorEnv", 400, {"num_links": 3}),
     EnvRow("pcc/LaneKeeping-v0", "pcc_envs.lane_keeping:LaneKeepingEnv", 200),

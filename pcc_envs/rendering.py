@@ -37,6 +37,7 @@ __all__ = [
     "CartPoleView",
     "PendulumView",
     "PlanarView",
+    "SCHEMATIC_CARTPOLE_VIEW",
     "render_arm",
     "render_cartpole",
     "render_pendulum",
@@ -140,13 +141,20 @@ def render_pendulum(
 class CartPoleView:
     """Camera of the cart-pole picture (the camera is fixed; the cart moves across it).
 
+    The defaults draw everything to one scale (the ``"physical"`` picture). The
+    ``"schematic"`` picture (:data:`SCHEMATIC_CARTPOLE_VIEW`) draws the pole longer and wider
+    than to scale, as the PCC authors' code does.
+
     Attributes:
         size: Frame side in pixels (80).
-        pixels_per_metre: Scale (15: the 2 x 2.4 m track spans 72 pixels, the pole 15).
+        pixels_per_metre: Cart position scale (15: the 2 x 2.4 m track spans 72 pixels).
         cart_half_width, cart_half_height: Cart rectangle half sizes in pixels (3.5, 2.5).
         cart_row: Image row of the cart centre (52).
         pole_width: Pole stroke width in pixels (2.5).
-        angle_bins: Pole angle resolution ``2 pi / angle_bins`` (1024: < 0.1 pixel at the tip).
+        pole_pixels: Pole length in pixels; ``None`` draws it to scale (2 x half-length x
+            ``pixels_per_metre``: 15 pixels).
+        angle_bins: Pole angle resolution ``2 pi / angle_bins`` (1024: < 0.1 pixel at the tip
+            of a 15-pixel pole).
         phases: Sub-pixel positions of the cart per pixel (4: the cart is placed at quarter
             pixels, 1/60 m).
     """
@@ -157,8 +165,25 @@ class CartPoleView:
     cart_half_height: float = 2.5
     cart_row: float = 52.0
     pole_width: float = 2.5
+    pole_pixels: float | None = None
     angle_bins: int = 1024
     phases: int = 4
+
+    def pole_length(self, params: CartPoleParams) -> float:
+        """The pole's length in pixels."""
+        if self.pole_pixels is not None:
+            return self.pole_pixels
+        return 2.0 * params.pole_half_length * self.pixels_per_metre
+
+
+#: The PCC authors' cart-pole picture: a 52-pixel pole 6 pixels wide (0.65 of the frame) on a
+#: 16 x 8 pixel cart near the bottom, the track spanning the frame less the cart. Its tip moves
+#: 3.5 times as far per step as the tip of the 15-pixel pole drawn to scale, and it covers
+#: about 8 times as many pixels. 4096 angle bins keep the tip's resolution under 0.1 pixel.
+SCHEMATIC_CARTPOLE_VIEW = CartPoleView(
+    pixels_per_metre=32.0 / 2.4, cart_half_width=8.0, cart_half_height=4.0, cart_row=70.0,
+    pole_width=6.0, pole_pixels=52.0, angle_bins=4096,
+)
 
 
 @functools.cache
@@ -167,7 +192,7 @@ def _cartpole_table(params: CartPoleParams, view: CartPoleView) -> tuple[np.ndar
 
     Local column ``reach`` holds the cart centre's whole pixel.
     """
-    pole = 2.0 * params.pole_half_length * view.pixels_per_metre
+    pole = view.pole_length(params)
     reach = int(np.ceil(max(pole, view.cart_half_width) + view.pole_width + 2))
     top = int(np.floor(view.cart_row - view.cart_half_height - pole - view.pole_width - 2))
     bottom = int(np.ceil(view.cart_row + max(view.cart_half_height, pole) + view.pole_width + 2))

@@ -577,8 +577,8 @@ def test_overrides_that_change_the_runs_rename_the_preset():
     # Table 3 runs Planar at noise variance 1 and 2, the other domains at variance 1.
     noisy = REPRODUCE_PRESETS["paper-noisy"]
     levels = {(r.env_id, r.noise_std) for r in expand_grid(noisy, include_oracle=False)}
-    assert ("pcc/Planar-v0", 2.0**0.5) in levels and ("pcc/CartPole-v0", 1.0) in levels
-    assert ("pcc/CartPole-v0", 2.0**0.5) not in levels
+    assert ("pcc/Planar-v0", 2.0**0.5) in levels and ("pcc/CartPole-v1", 1.0) in levels
+    assert ("pcc/CartPole-v1", 2.0**0.5) not in levels
 
 
 def test_summary_says_which_table_and_when_the_grid_is_reduced():

@@ -198,6 +198,22 @@ def test_cartpole_terminates_only_off_track():
     assert env.step(np.ones(1, dtype=np.float32))[2]
 
 
+def test_cartpole_pictures_draw_the_pole_to_scale_or_as_the_paper_code_does():
+    """v0 draws the 1 m pole at 15 pixels per metre on a 5-pixel-high cart; v1 draws it 52 x 6
+    pixels on an 8-pixel-high cart."""
+    upright = np.zeros(4)
+    for env_id, pole_and_cart_rows, width in [("pcc/CartPole-v0", 15 + 5, 2.5),
+                                              ("pcc/CartPole-v1", 52 + 8, 6)]:
+        frame = _make(env_id).unwrapped.render_state(upright).astype(float) / 255
+        pole_column = int(np.argmax(frame.sum(axis=0)))
+        lit_rows = np.flatnonzero(frame[:, pole_column] > 0.5)
+        # Within the pole's round end caps.
+        assert abs(len(lit_rows) - pole_and_cart_rows) <= 4, (env_id, len(lit_rows))
+        assert abs(frame[lit_rows[0] + 3].sum() - width) < 1.0, env_id  # the pole's width
+    with pytest.raises(ValueError, match="picture must be one of"):
+        _make("pcc/CartPole-v0", picture="photo")
+
+
 def test_arm_start_is_not_a_success():
     for env_id, angles in [
         ("pcc/ThreeLink-v0", [np.pi, 2 * np.pi / 3, np.pi / 3]),
