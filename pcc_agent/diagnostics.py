@@ -53,9 +53,11 @@ from pcc_agent.model import EmbeddingModel
 
 __all__ = [
     "GoalLinearization",
+    "GoalPrediction",
     "LatentDiagnostics",
     "goal_linearization",
     "goal_path_barrier",
+    "goal_prediction",
     "knn_decodability",
     "largest_climb",
     "latent_diagnostics",
@@ -411,6 +413,105 @@ def true_goal_linearization(env: Any, fd_step: float = 1e-5) -> GoalLinearizatio
     moved = base.state_error(dynamics.step(goal, still).numpy(), goal.numpy())
     A, B = dynamics.jacobians(goal, still)  # noqa: N806
     return _linearization(float(np.linalg.norm(moved)), A[0].numpy(), B[0].numpy())
+
+
+@dataclass(frozen=True)
+class GoalPrediction:
+    """How well the learned latent dynamics predict, and feel the action, near the goal.
+
+    Attributes:
+        error_over_hold: Open-loop prediction error after ``horizon`` steps,
+            ``mean || z_hat_k - mu(x_k) ||``, over the error of predicting that nothing
+            moves, ``mean || mu(x_0) - mu(x_k) ||``: below 1 the model beats standing still.
+        action_effect: The action's one-step effect on the prediction,
+            ``mean || f(z_0, u_0) - f(z_0, 0) ||``, over the one-step prediction error
+            ``mean || f(z_0, u_0) - mu(x_1) ||``: well below 1, the planner steers a system
+            whose response to the action is lost in the model's error.
+        horizon: Steps of the open-loop prediction.
+        num_starts: Start states the means are over.
+    """
+
+    error_over_hold: float
+    action_effect: float
+    horizon: int
+    num_starts: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly representation."""
+        return asdict(self)
+
+
+def goal_prediction(
+    model: EmbeddingModel,
+    env: Any,
+    horizon: int = 10,
+    num_starts: int = 200,
+    spread: float = 0.1,
+    seed: int = 0,
+) -> GoalPrediction:
+    """Open-loop prediction and the action's effect of the learned dynamics near the goal.
+
+    The starts are the env's goal state moved by ``U(-spread, spread)`` times the half-width
+    of its sampler box in every coordinate (kept inside the box); the actions are uniform in
+    ``[-1, 1]``. The true
+    trajectories come from the env's ``transition`` (its true dynamics, no noise); every
+    true state is rendered (``observations_of``) and encoded, and the model's mean dynamics
+    roll the start's code forward with the same actions. Near the goal a balancing task's
+    states move little per step, so a model that fits the sampler's fast motions can still
+    predict worse than standing still there; this measures it.
+
+    Args:
+        model: A trained embedding model.
+        env: A ``pcc_envs`` environment with cheap true dynamics (``supports_oracle``;
+            wrapped or not).
+        horizon: Steps of the open-loop prediction.
+        num_starts: Start states.
+        spread: Size of the start region, as a share of the sampler box's half-width.
+        seed: Seed of the starts and actions.
+
+    Returns:
+        The :class:`GoalPrediction`.
+    """
+    core = getattr(env, "unwrapped", env)
+    if not getattr(core, "supports_oracle", False) or not all(
+            hasattr(core, name) for name in ("goal_state", "state_low", "state_high",
+                                             "transition", "observations_of")):
+        raise ValueError("goal_prediction needs a pcc_envs environment with cheap true "
+                         "dynamics (supports_oracle, goal_state, a sampler box, transition).")
+    if horizon < 1 or num_starts < 1 or not spread > 0:
+        raise ValueError(f"horizon and num_starts must be >= 1 and spread > 0, got "
+                         f"{horizon}, {num_starts}, {spread}.")
+    rng = np.random.default_rng(seed)
+    half_width = (np.asarray(core.state_high) - np.asarray(core.state_low)) / 2.0
+    goal = np.asarray(core.goal_state, dtype=np.float64)
+    low, high = np.asarray(core.state_low), np.asarray(core.state_high)
+    states = np.clip(goal + rng.uniform(-spread, spread, (num_starts, goal.size)) * half_width,
+                     low, high)
+    actions = rng.uniform(-1.0, 1.0, (horizon, num_starts, model.action_dim))
+    trajectory = [states]
+    for step_actions in actions:
+        trajectory.append(core.transition(trajectory[-1], step_actions))
+    device = next(model.parameters()).device
+
+    def codes(batch: np.ndarray) -> torch.Tensor:
+        obs = torch.as_tensor(core.observations_of(batch), device=device)
+        return model.encode(obs)[0]
+
+    with _eval_mode(model), torch.no_grad():
+        start = codes(trajectory[0])
+        u = torch.as_tensor(actions, dtype=start.dtype, device=device)
+        first = model.transition_mean(start, u[0])
+        idle = model.transition_mean(start, torch.zeros_like(u[0]))
+        one_step_error = (first - codes(trajectory[1])).norm(dim=1).mean()
+        action_effect = float((first - idle).norm(dim=1).mean() / one_step_error)
+        predicted = start
+        for k in range(horizon):
+            predicted = model.transition_mean(predicted, u[k])
+        last = codes(trajectory[-1])
+        error = (predicted - last).norm(dim=1).mean()
+        hold = (start - last).norm(dim=1).mean()
+    return GoalPrediction(error_over_hold=float(error / hold), action_effect=action_effect,
+                          horizon=horizon, num_starts=num_starts)
 
 
 def largest_climb(values: Any) -> float:

@@ -15,7 +15,10 @@ planner's cost, the latent distance to the goal, climbs on the straight way from
 start to the goal (:func:`pcc_agent.diagnostics.goal_path_barrier`, the mean over the run's
 tasks), and whether the held-out states coded nearest the goal are near it in state space
 (:func:`pcc_agent.diagnostics.goal_aliasing`: near 0 if so, near 1 or above for a fold that
-puts a distant state there). Nothing is retrained and no control task is rerun.
+puts a distant state there), and, on envs with cheap true dynamics, how the latent dynamics
+predict and feel the action near the goal (:func:`pcc_agent.diagnostics.goal_prediction`:
+the 10-step open-loop error over that of standing still, and the action's one-step effect
+over the one-step error). Nothing is retrained and no control task is rerun.
 
 Usage:
     python -m pcc_bench.latent_diagnostics --results-dir results/reproduce \
@@ -45,7 +48,7 @@ HELD_OUT_SEED = 1_000_000
 MIN_SAMPLES = 30
 DIAGNOSTICS = ("consistency_error", "curvature", "latent_scale", "best_validation_loss",
                "min_state_r2", "goal_drift", "goal_spectral_radius", "goal_path_barrier",
-               "goal_aliasing")
+               "goal_aliasing", "goal_prediction_error", "goal_action_effect")
 
 
 def spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
@@ -98,6 +101,7 @@ def _diagnose_run(
         goal_aliasing,
         goal_linearization,
         goal_path_barrier,
+        goal_prediction,
         latent_diagnostics,
         state_decodability,
     )
@@ -125,12 +129,16 @@ def _diagnose_run(
             goal_path_barrier(agent.model, env, start, agent.goal_observation,
                               found.latent_scale)
             for start in distinct], weights=counts))
+    near_goal = (goal_prediction(agent.model, env)
+                 if getattr(env.unwrapped, "supports_oracle", False) else None)
     print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
           f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
           f"R^2 {np.round(state_r2, 2).tolist()}, at the goal: drift {at_goal.drift:.3f}, "
           f"spectral radius {at_goal.spectral_radius:.3f}, goal path barrier "
-          f"{'-' if barrier is None else f'{barrier:.2f}'}, goal aliasing {aliasing:.2f}",
-          flush=True)
+          f"{'-' if barrier is None else f'{barrier:.2f}'}, goal aliasing {aliasing:.2f}"
+          + ("" if near_goal is None else
+             f", near the goal: prediction error / hold {near_goal.error_over_hold:.2f}, "
+             f"action effect {near_goal.action_effect:.3f}"), flush=True)
     return {
         "env": env_id, "preset": preset, "method": spec.method, "seed": spec.seed,
         "noise_std": spec.noise_std, "percent_in_goal": float(record["mean"]),
@@ -142,6 +150,8 @@ def _diagnose_run(
         "goal_spectral_radius": at_goal.spectral_radius,
         "goal_path_barrier": barrier,
         "goal_aliasing": aliasing,
+        "goal_prediction_error": None if near_goal is None else near_goal.error_over_hold,
+        "goal_action_effect": None if near_goal is None else near_goal.action_effect,
     }
 
 
@@ -202,19 +212,22 @@ def markdown(
     lines = [
         "| method | seed | % in goal | consistency error | curvature | latent scale "
         "| best val. loss | state R^2 (k-NN, per coordinate) | goal drift "
-        "| goal spectral radius | goal path barrier | goal aliasing |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| goal spectral radius | goal path barrier | goal aliasing "
+        "| goal prediction error | goal action effect |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         val = "-" if r["best_validation_loss"] is None else f"{r['best_validation_loss']:.1f}"
-        barrier, aliasing = ("-" if r.get(key) is None else f"{r[key]:.2f}"
-                             for key in ("goal_path_barrier", "goal_aliasing"))
+        barrier, aliasing, prediction, effect = (
+            "-" if r.get(key) is None else f"{r[key]:.{digits}f}"
+            for key, digits in (("goal_path_barrier", 2), ("goal_aliasing", 2),
+                                ("goal_prediction_error", 2), ("goal_action_effect", 3)))
         lines.append(
             f"| {r['method']} | {r['seed']} | {r['percent_in_goal']:.1f} "
             f"| {r['consistency_error']:.4f} | {r['curvature']:.2e} | {r['latent_scale']:.2f} "
             f"| {val} | {', '.join(f'{v:.2f}' for v in r['state_r2'])} "
             f"| {r['goal_drift']:.3f} | {r['goal_spectral_radius']:.3f} "
-            f"| {barrier} | {aliasing} |"
+            f"| {barrier} | {aliasing} | {prediction} | {effect} |"
         )
     lines += ["", "Goal drift: one step with no action from the goal's code, in units of the "
               "latent scale. Goal spectral radius: the largest eigenvalue modulus of the "
@@ -224,7 +237,13 @@ def markdown(
               "it falls all the way). Goal aliasing: the largest state distance from the goal "
               "of the 10 held-out states coded nearest the goal, over the median of all "
               "held-out states (near 0: the goal's latent neighbours are its state "
-              "neighbours; near 1 or above: a fold puts a distant state there)."]
+              "neighbours; near 1 or above: a fold puts a distant state there). Goal "
+              "prediction error: from 200 states near the goal with random actions, the "
+              "10-step open-loop latent prediction's error over the error of predicting that "
+              "nothing moves (below 1: better than standing still). Goal action effect: the "
+              "action's one-step effect on the predicted code over the one-step prediction "
+              "error (well below 1: the planner steers a response lost in the model's "
+              "error)."]
     if true_goal is not None:
         lines[-1] += (f" The true dynamics at the goal state: spectral radius "
                       f"{true_goal['spectral_radius']:.3f}, eigenvalue moduli "

@@ -14,6 +14,7 @@ from pcc_agent.diagnostics import (
     goal_aliasing,
     goal_linearization,
     goal_path_barrier,
+    goal_prediction,
     knn_decodability,
     largest_climb,
     latent_diagnostics,
@@ -137,6 +138,26 @@ def test_true_goal_linearization_of_the_upright_cart_pole():
     assert found.spectral_radius == pytest.approx(np.exp(rate * env.unwrapped.dt), rel=1e-5)
     assert found.eigenvalue_moduli[-1] == pytest.approx(np.exp(-rate * env.unwrapped.dt),
                                                         rel=1e-5)
+
+
+def test_goal_prediction_of_dynamics_that_never_move_is_standing_still():
+    """f(z, u) = z: the open-loop prediction is the start's code (error = hold's error) and
+    the action moves nothing; the planar agent moves near the goal, so hold's error is > 0."""
+    model = planar_model()
+    with torch.no_grad():
+        model.dynamics.head.weight.zero_()
+        model.dynamics.head.bias.zero_()
+    env = gym.make("pcc/Planar-v0")
+    found = goal_prediction(model, env, horizon=5, num_starts=20, spread=0.2)
+    assert found.error_over_hold == pytest.approx(1.0, rel=1e-6)
+    assert found.action_effect == 0.0
+    assert (found.horizon, found.num_starts) == (5, 20)
+    assert goal_prediction(model, env, horizon=5, num_starts=20, spread=0.2) == found
+    with pytest.raises(ValueError, match="cheap true dynamics"):
+        goal_prediction(model, object())
+    with pytest.raises(ValueError, match="horizon and num_starts"):
+        goal_prediction(model, env, horizon=0)
+    env.close()
 
 
 def test_largest_climb_is_the_rise_above_the_running_minimum():
