@@ -79,7 +79,8 @@ class CartPoleEnv(ImageControlEnv):
 
     ## Arguments
     ``max_force`` (N), ``noise_std``, ``reward_type``, ``render_mode``, ``picture``
-    (``"physical"`` or ``"schematic"``).
+    (``"physical"`` or ``"schematic"``), ``sampler_angle`` (the data sampler's pole angle
+    range ``[-a, a]``, default ``pi/2``; the PC3 reference code's is ``pi/10``).
 
     >>> import gymnasium as gym
     >>> import pcc_envs  # noqa: F401
@@ -107,17 +108,20 @@ class CartPoleEnv(ImageControlEnv):
         reward_type: str = "dense",
         render_mode: str | None = None,
         picture: str = "physical",
+        sampler_angle: float = SAMPLER_ANGLE,
     ) -> None:
         if not max_force > 0:
             raise ValueError(f"max_force must be > 0 N, got {max_force!r}")
         if picture not in PICTURES:
             raise ValueError(f"picture must be one of {sorted(PICTURES)}, got {picture!r}")
+        if not 0 < sampler_angle <= np.pi:
+            raise ValueError(f"sampler_angle must be in (0, pi] rad, got {sampler_angle!r}")
         self.params = CartPoleParams(max_force=float(max_force))
         self.picture = picture
         self.view = PICTURES[picture]
         self.action_scale = (self.params.max_force,)
         limit = self.params.track_limit
-        self.state_low = np.array([-SAMPLER_ANGLE, -SAMPLER_OMEGA, -limit, -SAMPLER_VELOCITY])
+        self.state_low = np.array([-sampler_angle, -SAMPLER_OMEGA, -limit, -SAMPLER_VELOCITY])
         self.state_high = -self.state_low
         super().__init__(noise_std=noise_std, reward_type=reward_type, render_mode=render_mode)
 

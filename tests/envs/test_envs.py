@@ -214,6 +214,16 @@ def test_cartpole_pictures_draw_the_pole_to_scale_or_as_the_paper_code_does():
         _make("pcc/CartPole-v0", picture="photo")
 
 
+def test_cartpole_sampler_angle_sets_the_data_range():
+    env = _make("pcc/CartPole-v1", sampler_angle=np.pi / 10).unwrapped
+    states = env.sample_states(np.random.default_rng(0), 500)
+    assert np.abs(states[:, 0]).max() <= np.pi / 10 < 2 * np.abs(states[:, 0]).max()
+    assert np.abs(states[:, 1]).max() > 1.0  # the other ranges stay
+    for bad in (0.0, -0.1, 4.0):
+        with pytest.raises(ValueError, match="sampler_angle must be in"):
+            _make("pcc/CartPole-v1", sampler_angle=bad)
+
+
 def test_arm_start_is_not_a_success():
     for env_id, angles in [
         ("pcc/ThreeLink-v0", [np.pi, 2 * np.pi / 3, np.pi / 3]),

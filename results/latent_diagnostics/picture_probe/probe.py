@@ -27,6 +27,8 @@ p.add_argument("--seed", type=int, default=0)
 p.add_argument("--tasks", type=int, default=5)
 p.add_argument("--transition-hidden", type=int, nargs="+", default=None,
                help="Hidden widths of the transition MLP (default: the preset's).")
+p.add_argument("--sampler-angle", type=float, default=None,
+               help="The env's data sampler angle range (default: the env's, pi/2).")
 p.add_argument("--out", required=True)
 a = p.parse_args()
 torch.set_num_threads(1)
@@ -35,7 +37,8 @@ preset = base.with_training(flush_denormals=True, epochs=a.epochs)
 if a.transition_hidden:
     preset = dataclasses.replace(preset, model=dataclasses.replace(
         preset.model, transition_hidden=tuple(a.transition_hidden)))
-data = _held_out_transitions(a.env, 3000, 0.0)
+env_kwargs = {} if a.sampler_angle is None else {"sampler_angle": a.sampler_angle}
+data = _held_out_transitions(a.env, 3000, 0.0)  # the default sampler box: the same data for all
 env = gym.make(a.env).unwrapped
 
 # Near-upright starts and random actions for the open-loop prediction test.
@@ -84,7 +87,7 @@ def score(agent):
     r2 = state_decodability(agent.model, data.obs, data.state, env.state_error)
     row = {"minutes": round((time.time() - t0) / 60, 1), "r2": np.round(r2, 3).tolist(),
            **prediction_errors(agent.model)}
-    ev = evaluate_on_validation_tasks(agent, a.env, a.tasks)
+    ev = evaluate_on_validation_tasks(agent, a.env, a.tasks, env_kwargs)
     row["validation"] = ev.mean
     log.append(row)
     print(row, flush=True)
@@ -94,7 +97,8 @@ def score(agent):
     return ev.mean
 
 
-agent = PCCAgent(a.env, "pcc", preset=preset, seed=a.seed, device="cpu")
+agent = PCCAgent(a.env, "pcc", preset=preset, seed=a.seed, device="cpu",
+                 env_kwargs=env_kwargs)
 agent.learn(callback=KeepBestControl(score, every=a.every, start=a.every, verbose=1),
             progress_bar=False)
 print("done", round(time.time() - t0), "s")
