@@ -53,7 +53,10 @@ def test_paper_planar_architecture_sizes():
     linears = [m for m in model.decoder.modules() if isinstance(m, torch.nn.Linear)]
     assert [(m.in_features, m.out_features) for m in linears] == [(2, 300), (300, 300),
                                                                   (300, 1600)]
-    assert [get_preset(e).model.latent_dim for e in PRESETS] == [2, 3, 3, 8, 8, 8, 8]
+    assert {e: get_preset(e).model.latent_dim for e in PRESETS} == {
+        "pcc/Planar-v0": 2, "pcc/PendulumSwingUp-v0": 3, "pcc/PendulumBalance-v0": 3,
+        "pcc/CartPole-v0": 8, "pcc/CartPole-v1": 8, "pcc/TwoLink-v0": 8, "pcc/ThreeLink-v0": 8,
+        "pcc/LaneKeeping-v0": 8}
 
 
 def test_uint8_observations_are_scaled_inside_the_model():
