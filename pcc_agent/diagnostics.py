@@ -482,11 +482,10 @@ def goal_prediction(
         raise ValueError(f"horizon and num_starts must be >= 1 and spread > 0, got "
                          f"{horizon}, {num_starts}, {spread}.")
     rng = np.random.default_rng(seed)
-    half_width = (np.asarray(core.state_high) - np.asarray(core.state_low)) / 2.0
-    goal = np.asarray(core.goal_state, dtype=np.float64)
     low, high = np.asarray(core.state_low), np.asarray(core.state_high)
-    states = np.clip(goal + rng.uniform(-spread, spread, (num_starts, goal.size)) * half_width,
-                     low, high)
+    goal = np.asarray(core.goal_state, dtype=np.float64)
+    offsets = rng.uniform(-spread, spread, (num_starts, goal.size)) * ((high - low) / 2.0)
+    states = np.clip(goal + offsets, low, high)
     actions = rng.uniform(-1.0, 1.0, (horizon, num_starts, model.action_dim))
     trajectory = [states]
     for step_actions in actions:
