@@ -133,6 +133,7 @@ class PCCAgent:
         self.model.to(self.device)
         self._goal_obs: np.ndarray | None = None
         self._goal_version = 0
+        self._epochs_trained = 0  # bumped by learn() every epoch: part of the planner's key
         self._plan_generator = torch.Generator().manual_seed(self.seed)
         self._mpc: LatentMPC | None = None
         self._mpc_key: tuple[Any, ...] | None = None
@@ -351,6 +352,7 @@ class PCCAgent:
 
         def on_epoch(epoch: int, metrics: dict[str, float]) -> bool:
             # ``epoch`` counts the epochs of a resumed training too: the same steps as unbroken.
+            self._epochs_trained += 1  # the weights changed: the planner must be rebuilt
             self.num_timesteps = first_timestep + epoch * epoch_timesteps
             for key, value in metrics.items():
                 self.logger.record(f"train/{key}", value)
@@ -416,21 +418,29 @@ class PCCAgent:
         """The goal observation (a copy), or None before ``learn``."""
         return None if self._goal_obs is None else self._goal_obs.copy()
 
-    def _weights_key(self) -> tuple[tuple[int, int, int], ...]:
+    def _weights_key(self) -> tuple[Any, ...]:
         """A cheap version of the model's weights.
 
-        It changes with any in-place update (training, ``load_state_dict``) or replaced
-        tensor (``model.to``).
+        It changes with every epoch of :meth:`learn` and with any replaced tensor
+        (``model.to``) or in-place update that bumps the tensors' version counters
+        (``load_state_dict``, an optimizer without the fused kernel). The epoch count is needed
+        because the fused Adam kernel that training uses updates the weights in place without
+        bumping their version counters, so the counters alone kept the planner of the first
+        epoch for the whole training.
         """
-        return tuple((id(t), t.data_ptr(), t._version)
-                     for t in itertools.chain(self.model.parameters(), self.model.buffers()))
+        return (self._epochs_trained, *(
+            (id(t), t.data_ptr(), t._version)
+            for t in itertools.chain(self.model.parameters(), self.model.buffers())))
 
     @property
     def mpc(self) -> LatentMPC:
         """The latent MPC that :meth:`predict` runs (model dynamics, encoded goal, settings).
 
         Built at first use and rebuilt only when the goal, the planner settings or the model's
-        weights change (so the goal is encoded once, not at every step).
+        weights change (so the goal is encoded once, not at every step). Weights changes it
+        sees: every epoch of :meth:`learn`, ``load_state_dict``, ``model.to``. After changing
+        the weights in place some other way (an optimizer of your own), call
+        :meth:`set_planner` to rebuild it.
 
         Raises:
             RuntimeError: No goal set yet.

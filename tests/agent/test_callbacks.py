@@ -66,6 +66,29 @@ def test_the_trainers_weights_stay_when_they_score_best_and_nothing_else_changes
     assert agent.predict(obs)[0].tolist() == plain.predict(obs)[0].tolist()
 
 
+def test_scores_during_training_plan_with_that_epochs_model(tmp_path):
+    """Each mid-training score plans with the current weights: goal code and dynamics.
+
+    (The fused Adam step does not bump the weights' version counters; the planner of the
+    first scored epoch was once kept for the whole training.)
+    """
+    goal_codes: list[tuple[torch.Tensor, torch.Tensor]] = []
+
+    def score(agent: PCCAgent) -> float:
+        planned = agent.mpc.cost.goal.clone()
+        with torch.no_grad():
+            fresh = agent.model.encode(torch.as_tensor(agent.goal_observation[None]))[0][0]
+        goal_codes.append((planned, fresh))
+        return 0.0
+
+    tiny_agent(tmp_path, epochs=3).learn(total_timesteps=300,
+                                         callback=KeepBestControl(score, every=1))
+    assert len(goal_codes) == 4  # epochs 1-3 and the end
+    for planned, fresh in goal_codes:
+        assert torch.allclose(planned, fresh)
+    assert not torch.allclose(goal_codes[0][0], goal_codes[2][0])
+
+
 def test_validation_task_score_plans_on_the_validation_tasks(tmp_path):
     agent = tiny_agent(tmp_path, epochs=1).learn(total_timesteps=200)
     value = validation_task_score(ENV_ID, num_tasks=1)(agent)
