@@ -246,7 +246,7 @@ def _metadata(
     noise_std: float,
     env_kwargs: dict[str, Any] | None,
 ) -> dict[str, Any]:
-    return {
+    meta = {
         "env_id": env_id,
         "env_kwargs": json.loads(json.dumps(env_kwargs or {}, sort_keys=True)),
         "seed": int(seed),
@@ -255,6 +255,23 @@ def _metadata(
         "format_version": FORMAT_VERSION,
         "package_version": _package_version(),
     }
+    registered = _registered_kwargs(env_id)
+    if registered:  # only where the id has some, so that other ids keep their cached files
+        meta["registered_kwargs"] = registered
+    return meta
+
+
+def _registered_kwargs(env_id: str) -> dict[str, Any]:
+    """The constructor arguments the id is registered with (``gym.spec(env_id).kwargs``).
+
+    Part of the cache key: a change to an id's registered arguments (e.g. a data range) must
+    not reuse data sampled under the old ones.
+    """
+    try:
+        kwargs = gym.spec(env_id).kwargs
+    except gym.error.Error:  # not a registered id: make() will say so
+        return {}
+    return json.loads(json.dumps(kwargs, sort_keys=True, default=repr))
 
 
 def default_cache_dir() -> Path:
@@ -274,8 +291,8 @@ def cache_path(
     """The cache file of a dataset: a readable prefix plus the SHA-256 of its canonical key.
 
     The key is the canonical JSON of everything that changes the data: env id, env kwargs,
-    seed, the exact ``repr`` of ``noise_std``, ``num_samples``, :data:`FORMAT_VERSION` and
-    the package version.
+    the id's registered kwargs (where it has any), seed, the exact ``repr`` of ``noise_std``,
+    ``num_samples``, :data:`FORMAT_VERSION` and the package version.
     """
     meta = _metadata(env_id, num_samples, seed, noise_std, env_kwargs)
     digest = hashlib.sha256(

@@ -90,6 +90,19 @@ def test_cache_roundtrip_and_keys(tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
 
 
+def test_the_registered_kwargs_are_part_of_the_key(tmp_path, monkeypatch):
+    """An id re-registered with other arguments (a new data range) never reuses old data."""
+    import gymnasium as gym
+
+    before = cache_path("pcc/CartPole-v1", 64, 0, cache_dir=tmp_path)
+    assert collect_transitions("pcc/CartPole-v1", 2, 0).metadata["registered_kwargs"] == dict(
+        gym.spec("pcc/CartPole-v1").kwargs)
+    assert "registered_kwargs" not in collect_transitions("pcc/Planar-v0", 2, 0).metadata
+    spec = gym.spec("pcc/CartPole-v1")
+    monkeypatch.setattr(spec, "kwargs", {**spec.kwargs, "sampler_angle": 0.1})
+    assert cache_path("pcc/CartPole-v1", 64, 0, cache_dir=tmp_path) != before
+
+
 def test_cache_dir_from_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("PCC_DATA_DIR", str(tmp_path))
     assert cache_path("pcc/Planar-v0", 1, 0).parent == tmp_path
