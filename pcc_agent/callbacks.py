@@ -10,7 +10,9 @@ session of 2026-12-05). Scoring control every few epochs costs a few planned epi
 from __future__ import annotations
 
 import copy
+import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -28,8 +30,13 @@ class KeepBestControl(BaseCallback):
     of its lowest validation loss; they are scored too, and replaced by the copy only if the
     copy scored higher. One training step is one epoch (see ``PCCAgent.learn``).
 
-    A training resumed from a checkpoint starts a new history: the scores of the epochs
-    before the interruption are not kept.
+    With ``state_path``, the history and the best weights so far are written to that file
+    after every score, and a training resumed from a checkpoint (``learn(resume=True)``)
+    goes on from them; without it, a resumed training starts a new history. Scores of epochs
+    that the resumed training repeats are replaced by the new ones; weights kept from such an
+    epoch stay candidates (they were trained and scored). The file is left in place at the
+    end (a run killed after training but before its results are written resumes from it):
+    delete it when the results are safe.
 
     Attributes:
         history: ``(epoch, score)`` of every scored epoch, and ``(-1, score)`` for the
@@ -44,7 +51,7 @@ class KeepBestControl(BaseCallback):
     """
 
     def __init__(self, score: Callable[[Any], float], every: int = 10, start: int = 0,
-                 verbose: int = 0) -> None:
+                 verbose: int = 0, state_path: str | os.PathLike[str] | None = None) -> None:
         super().__init__(verbose)
         if not callable(score):
             raise TypeError(f"score must be a function agent -> float, got {score!r}.")
@@ -53,6 +60,7 @@ class KeepBestControl(BaseCallback):
         if start < 0:
             raise ValueError(f"start must be >= 0, got {start}.")
         self.score, self.every, self.start = score, every, start
+        self.state_path = None if state_path is None else Path(state_path)
         self.history: list[tuple[int, float]] = []
         self.best_epoch: int | None = None
         self.best_score: float | None = None
@@ -77,19 +85,47 @@ class KeepBestControl(BaseCallback):
 
     def _on_training_start(self) -> None:
         self.history, self.best_epoch, self.best_score, self._best_state = [], None, None, None
+        if (self.state_path is not None and self.locals.get("resume")
+                and self.state_path.is_file()):
+            self._load_state()
 
     def _on_step(self) -> bool:
         epoch = int(self.locals["epoch"])
         if epoch < self.start or epoch % self.every:
             return True
         value = self._scored()
-        self.history.append((epoch, value))
+        # A resumed training repeats the epochs after its checkpoint: their new scores count.
+        self.history = [(e, v) for e, v in self.history if e < epoch] + [(epoch, value)]
         if self.verbose:
             print(f"epoch {epoch}: control score {value:.1f}")
         if self.best_score is None or value > self.best_score:
             self.best_epoch, self.best_score = epoch, value
             self._best_state = copy.deepcopy(self.model.model.state_dict())
+        self._save_state()
         return True
+
+    def _save_state(self) -> None:
+        if self.state_path is None:
+            return
+        from pcc_agent.io import atomic_torch_save
+
+        atomic_torch_save({"history": [[e, v] for e, v in self.history],
+                           "best_epoch": self.best_epoch, "best_score": self.best_score,
+                           "best_state": self._best_state}, self.state_path)
+
+    def _load_state(self) -> None:
+        from pcc_agent.checkpoint import CheckpointError, torch_load_safely
+
+        assert self.state_path is not None
+        state = torch_load_safely(self.state_path)
+        try:
+            self.history = [(int(e), float(v)) for e, v in state["history"]]
+            self.best_epoch, self.best_score = state["best_epoch"], state["best_score"]
+            self._best_state = state["best_state"]
+        except (KeyError, TypeError, ValueError) as error:
+            raise CheckpointError(
+                f"{self.state_path} is not a KeepBestControl state ({error!r}); delete it to "
+                "start the control history afresh.") from error
 
     def _on_training_end(self) -> None:
         final = self._scored()

@@ -63,6 +63,7 @@ def expand_grid(preset: ReproducePreset, include_oracle: bool = True,
                             flush_denormals=preset.flush_denormals,
                             learning_rate=preset.learning_rate,
                             validation_tasks=preset.validation_tasks,
+                            keep_best_control_every=preset.keep_best_control_every or None,
                             **common,
                         )
                     )

@@ -96,6 +96,13 @@ class ReproducePreset:
             validation loss, then the lower seed): a training that keeps a folded latent map
             scores 0 there and is replaced. Run on the same workers, a spare can cost no
             wall time (3 models on 2 workers leave a worker free in the second round).
+        keep_best_control_every: With a value N > 0, every training scores its model on
+            :data:`CONTROL_SELECTION_TASKS` validation tasks (task seed 2021) every N epochs
+            and ends with the weights that scored best, the lowest-validation-loss weights
+            included (:class:`pcc_agent.callbacks.KeepBestControl`; its state is checkpointed
+            with the training). 0: the lowest-validation-loss weights, the paper's protocol.
+            Why: on CartPole the control of one training swings between 4 and 42 % from one
+            scored epoch to the next while its validation loss improves steadily.
     """
 
     name: str
@@ -116,10 +123,14 @@ class ReproducePreset:
     restarts: int = 1
     candidates_preset: str | None = None
     spare_trainings: int = 0
+    keep_best_control_every: int = 0
 
     def __post_init__(self) -> None:
         if self.spare_trainings < 0:
             raise ValueError(f"spare_trainings must be >= 0, got {self.spare_trainings}.")
+        if self.keep_best_control_every < 0:
+            raise ValueError("keep_best_control_every must be >= 0 epochs, got "
+                             f"{self.keep_best_control_every}.")
         if self.spare_trainings and self.restarts > 1:
             raise ValueError("A preset chooses its models either among restarts (by "
                              "validation loss) or among spare trainings, not both.")
@@ -137,7 +148,13 @@ class ReproducePreset:
 
     @property
     def validation_tasks(self) -> int | None:
-        """Validation tasks per training: :data:`VALIDATION_TASKS` with spares, else none."""
+        """Validation tasks per training (None: no validation tasks).
+
+        :data:`CONTROL_SELECTION_TASKS` when trainings keep their best-controlling weights,
+        :data:`VALIDATION_TASKS` with spares.
+        """
+        if self.keep_best_control_every:
+            return CONTROL_SELECTION_TASKS
         return VALIDATION_TASKS if self.spare_trainings else None
 
     def noise_levels_for(self, env_id: str) -> tuple[float, ...]:
@@ -187,9 +204,13 @@ RESTART_SEED_STRIDE = 1000
 #: Validation tasks per training of a preset with spare trainings (task seed 2021).
 VALIDATION_TASKS = 5
 
+#: Validation tasks per score of a preset whose trainings keep their best-controlling weights
+#: (``keep_best_control_every``): more than for spares, since an epoch is chosen among many.
+CONTROL_SELECTION_TASKS = 10
+
 #: Preset fields that change what a run trains or evaluates (see ReproducePreset.override).
 RUN_FIELDS: tuple[str, ...] = ("num_tasks", "task_seed", "num_samples", "max_epochs", "patience",
-                               "flush_denormals", "learning_rate")
+                               "flush_denormals", "learning_rate", "keep_best_control_every")
 
 
 def _tag_value(value: Any) -> str:

@@ -37,7 +37,9 @@ class RunSpec:
 
     ``validation_tasks``: when set, the trained model also runs that many validation tasks
     (``pcc_agent.evaluation.VALIDATION_TASK_SEED``), recorded as ``validation``; the presets
-    with spare trainings keep their models by that score. The other optional fields are
+    with spare trainings keep their models by that score. ``keep_best_control_every``: the
+    training scores control on those tasks every so many epochs and keeps the best weights
+    (``ReproducePreset.keep_best_control_every``). The other optional fields are
     command-line overrides of the preset (None: the preset's value).
     """
 
@@ -55,6 +57,7 @@ class RunSpec:
     flush_denormals: bool | None = None
     learning_rate: float | None = None
     validation_tasks: int | None = None
+    keep_best_control_every: int | None = None
 
     @property
     def relative_path(self) -> Path:
@@ -113,6 +116,14 @@ def weights_path(results_dir: str | Path, spec: RunSpec) -> Path:
 def training_checkpoint_path(results_dir: str | Path, spec: RunSpec) -> Path:
     """Where a run's training in progress is checkpointed (removed once the run is done)."""
     return checkpoint_path(results_dir, spec).with_suffix(".training.pt")
+
+
+def control_selection_path(results_dir: str | Path, spec: RunSpec) -> Path:
+    """Where a run's control scores and best weights so far are kept while it trains.
+
+    Used with ``keep_best_control_every``; removed with the training checkpoint.
+    """
+    return checkpoint_path(results_dir, spec).with_suffix(".control.pt")
 
 
 @dataclass(frozen=True)

@@ -132,6 +132,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--learning-rate", type=positive_float, metavar="LR",
                         help="Override Adam's learning rate (runs and rows are labelled).")
+    parser.add_argument(
+        "--keep-best-control", type=positive_int, metavar="EPOCHS",
+        help="Every EPOCHS epochs, score each training on 10 validation tasks (task seed "
+        "2021, never the evaluation tasks) and keep its best-controlling weights instead of "
+        "those of the lowest validation loss (runs and rows are labelled).")
     noise = parser.add_mutually_exclusive_group()
     noise.add_argument(
         "--noise", type=non_negative_float, nargs="+", metavar="STD",
@@ -224,6 +229,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["flush_denormals"] = True
         if args.learning_rate is not None:
             changes["learning_rate"] = args.learning_rate
+        if args.keep_best_control is not None:
+            changes["keep_best_control_every"] = args.keep_best_control
         noise_stds = args.noise or [variance**0.5 for variance in args.noise_variance or ()]
         if noise_stds:
             changes["noise_levels"] = tuple(noise_stds)

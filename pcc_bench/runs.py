@@ -21,6 +21,7 @@ from pcc_bench.records import (
     RESULT_FORMAT,
     RunSpec,
     checkpoint_path,
+    control_selection_path,
     load_finished_run,
     machine_info,
     preset_for,
@@ -110,7 +111,8 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         in_progress = training_checkpoint_path(results_dir, spec)
         resumed = resume_point(in_progress, replace(preset.train, seed=spec.seed),
                                 agent.model.architecture())
-        agent.learn(progress_bar=False, checkpoint_path=in_progress,
+        selection = _control_selection(spec, results_dir, env_kwargs)
+        agent.learn(progress_bar=False, checkpoint_path=in_progress, callback=selection,
                     resume=resumed is not None, checkpoint_every=TRAIN_CHECKPOINT_EVERY)
         record["train_seconds"] = time.perf_counter() - start
         if resumed is not None:  # add the epochs trained before the interruption
@@ -121,6 +123,11 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
         agent.save(checkpoint_path(results_dir, spec))
         record["config"] = agent.config_dict()
         record["training"] = agent.train_summary()
+        if selection is not None:
+            record["training"]["control_selection"] = {
+                "every": spec.keep_best_control_every, "tasks": spec.validation_tasks,
+                "history": [list(item) for item in selection.history],
+                "kept_epoch": selection.best_epoch, "kept_score": selection.best_score}
         agent, record["weights"] = save_half_weights(agent, results_dir, spec)
         evaluation_start = time.perf_counter()
         evaluation = evaluate_control(agent, spec.env_id, seeds, env_kwargs)
@@ -136,7 +143,26 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     atomic_write_json(path, record)
     if spec.method not in REFERENCE_METHODS:  # the training is complete, its record written
         remove_training_checkpoint(training_checkpoint_path(results_dir, spec))
+        control_selection_path(results_dir, spec).unlink(missing_ok=True)
     return record
+
+
+def _control_selection(spec: RunSpec, results_dir: str | Path,
+                       env_kwargs: dict[str, Any]) -> Any:
+    """The run's :class:`~pcc_agent.callbacks.KeepBestControl`, or None.
+
+    None when the run keeps the lowest-validation-loss weights. It scores on the validation
+    tasks, its state checkpointed beside the training's.
+    """
+    if not spec.keep_best_control_every:
+        return None
+    from pcc_agent.callbacks import KeepBestControl, validation_task_score
+
+    assert spec.validation_tasks
+    every = spec.keep_best_control_every
+    return KeepBestControl(validation_task_score(spec.env_id, spec.validation_tasks, env_kwargs),
+                           every=every, start=every,
+                           state_path=control_selection_path(results_dir, spec))
 
 
 def validation_control(agent: Any, spec: RunSpec, env_kwargs: dict[str, Any]) -> dict[str, Any]:

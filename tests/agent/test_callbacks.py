@@ -89,6 +89,36 @@ def test_scores_during_training_plan_with_that_epochs_model(tmp_path):
     assert not torch.allclose(goal_codes[0][0], goal_codes[2][0])
 
 
+def test_a_resumed_training_keeps_the_control_history_and_best_weights(tmp_path):
+    """Killed at epoch 3 (checkpoint at 2), resumed: epoch 1's weights still win."""
+    values = {1: 9.0, 2: 1.0, 3: 3.0, 4: 2.0}
+    seen: dict[int, dict[str, torch.Tensor]] = {}
+
+    def score(agent: PCCAgent, interrupt_at: int | None = None) -> float:
+        epoch = agent.num_timesteps // 300
+        if epoch == interrupt_at:
+            raise KeyboardInterrupt
+        seen.setdefault(epoch, weights(agent))
+        return values[epoch]
+
+    state, checkpoint = tmp_path / "control.pt", tmp_path / "training.pt"
+    first = KeepBestControl(lambda agent: score(agent, interrupt_at=3), every=1,
+                            state_path=state)
+    with pytest.raises(KeyboardInterrupt):
+        tiny_agent(tmp_path).learn(total_timesteps=300, callback=first,
+                                   checkpoint_path=checkpoint, checkpoint_every=2)
+    assert first.history == [(1, 9.0), (2, 1.0)] and state.is_file()
+    resumed = KeepBestControl(score, every=1, state_path=state)
+    agent = tiny_agent(tmp_path).learn(total_timesteps=300, callback=resumed,
+                                       checkpoint_path=checkpoint, resume=True)
+    assert resumed.history == [(1, 9.0), (2, 1.0), (3, 3.0), (4, 2.0), (-1, 2.0)]
+    assert resumed.best_epoch == 1 and same(weights(agent), seen[1])
+    # Without resume=True the file is ignored: a new training starts a new history.
+    fresh = KeepBestControl(score, every=2, state_path=state)
+    tiny_agent(tmp_path, epochs=2).learn(total_timesteps=300, callback=fresh)
+    assert fresh.history == [(2, 1.0), (-1, 1.0)]
+
+
 def test_validation_task_score_plans_on_the_validation_tasks(tmp_path):
     agent = tiny_agent(tmp_path, epochs=1).learn(total_timesteps=200)
     value = validation_task_score(ENV_ID, num_tasks=1)(agent)

@@ -129,6 +129,21 @@ def test_run_killed_mid_training_resumes_to_the_uninterrupted_result(tmp_path):
     assert resumed["percentages"] == straight["percentages"]
 
 
+def test_a_run_that_keeps_its_best_controlling_weights_records_the_choice(tmp_path):
+    from pcc_bench.records import control_selection_path
+
+    spec = dataclasses.replace(tiny_spec(1), max_epochs=4, patience=10, validation_tasks=1,
+                               keep_best_control_every=2)
+    record = execute_run(spec, tmp_path, str(tmp_path / "data"))
+    chosen = record["training"]["control_selection"]
+    assert chosen["every"] == 2 and chosen["tasks"] == 1
+    assert [epoch for epoch, _ in chosen["history"]] == [2, 4, -1]
+    assert chosen["kept_score"] == max(score for _, score in chosen["history"])
+    assert chosen["kept_epoch"] in (2, 4, -1)
+    assert len(record["validation"]["percentages"]) == 1
+    assert not control_selection_path(tmp_path, spec).exists()  # removed once done
+
+
 def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_path):
     from pcc_agent.checkpoint import load_checkpoint, save_checkpoint
     from pcc_agent.model import EmbeddingModel
