@@ -97,9 +97,18 @@ def training_recipe(settings: dict[str, Any]) -> str:
             f"not before epoch {train.get('min_epochs', 0)}, at most {train.get('epochs')}")
 
 
+def _override(preset: str, field: str) -> str | None:
+    """The value of a command-line override in a preset name ``base+field=value,...``."""
+    for tag in preset.partition("+")[2].split(","):
+        key, _, value = tag.partition("=")
+        if key == field:
+            return value
+    return None
+
+
 def settings_table(rows: list[dict[str, Any]]) -> str:
     """The evaluation and training settings of every (env, preset, method) row."""
-    from pcc_bench.presets import TASK_STARTS
+    from pcc_bench.presets import CONTROL_SELECTION_TASKS, TASK_STARTS
 
     seen: dict[tuple[str, str, str], dict[str, Any]] = {}
     for r in rows:
@@ -125,6 +134,11 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
             recipe += (f"; the {registered.num_models} of "
                        f"{registered.num_models + registered.spare_trainings} trainings that "
                        "control best on validation tasks (task seed 2021)")
+        every = _override(preset, "keep_best_control_every")
+        if every is not None:
+            recipe += (f"; each training ends with its weights that control best on "
+                       f"{CONTROL_SELECTION_TASKS} validation tasks (task seed 2021), scored "
+                       f"every {every} epochs")
         lines.append(
             f"| {env} | {preset} | {method} | {s.get('episode_length', '-')} "
             f"| {p.get('plan_length')} ({p.get('replan_every', 1)}) "

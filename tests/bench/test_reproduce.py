@@ -144,6 +144,18 @@ def test_a_run_that_keeps_its_best_controlling_weights_records_the_choice(tmp_pa
     assert not control_selection_path(tmp_path, spec).exists()  # removed once done
 
 
+def test_the_settings_table_says_how_the_weights_were_chosen():
+    from pcc_bench.tables import settings_table
+
+    row = {"env": "pcc/CartPole-v1", "method": "pcc", "n_tasks": 10, "seeds": [0],
+           "preset": "paper-motion+max_epochs=60,keep_best_control_every=10",
+           "settings": {"planner": {}, "train": {"epochs": 60}}}
+    assert ("control best on 10 validation tasks (task seed 2021), scored every 10 epochs"
+            in settings_table([row]))
+    row["preset"] = "paper-motion+max_epochs=60"
+    assert "validation tasks" not in settings_table([row])
+
+
 def test_training_checkpoint_of_a_finished_or_other_training_is_discarded(tmp_path):
     from pcc_agent.checkpoint import load_checkpoint, save_checkpoint
     from pcc_agent.model import EmbeddingModel
