@@ -98,8 +98,11 @@ def training_recipe(settings: dict[str, Any]) -> str:
 
 
 def _override(preset: str, field: str) -> str | None:
-    """The value of a command-line override in a preset name ``base+field=value,...``."""
-    for tag in preset.partition("+")[2].split(","):
+    """The value of a command-line override in a row's preset label.
+
+    Labels are ``base+field=value,...``, possibly followed by `` [planner rN]``.
+    """
+    for tag in preset.split(" [", 1)[0].partition("+")[2].split(","):
         key, _, value = tag.partition("=")
         if key == field:
             return value

@@ -152,6 +152,8 @@ def test_the_settings_table_says_how_the_weights_were_chosen():
            "settings": {"planner": {}, "train": {"epochs": 60}}}
     assert ("control best on 10 validation tasks (task seed 2021), scored every 10 epochs"
             in settings_table([row]))
+    row["preset"] = "paper-motion+keep_best_control_every=10 [planner r3]"  # an older row
+    assert "scored every 10 epochs;" in settings_table([row]).replace(" |", ";")
     row["preset"] = "paper-motion+max_epochs=60"
     assert "validation tasks" not in settings_table([row])
 
