@@ -135,6 +135,7 @@ def evaluate_control(
     env_kwargs: dict[str, Any] | None = None,
     record_states: bool = True,
     deterministic: bool = True,
+    reset_options: dict[str, Any] | None = None,
 ) -> ControlEvaluation:
     """Run one episode per seed and measure the percentage of steps in goal.
 
@@ -148,6 +149,8 @@ def evaluate_control(
         env_kwargs: Extra keyword arguments for ``gym.make`` (e.g. ``noise_std``).
         record_states: Keep the true-state trajectory of every task.
         deterministic: Passed to ``predict``.
+        reset_options: ``options`` of every episode's ``reset`` (e.g. ``{"start":
+            "validation"}`` for a pcc env's validation starts).
 
     Returns:
         A :class:`ControlEvaluation` with one :class:`TaskResult` per seed.
@@ -161,6 +164,8 @@ def evaluate_control(
         episode_length = int(env.spec.max_episode_steps) if env.spec else 0
         vec_env = DummyVecEnv([lambda env=env: Monitor(env)])
         vec_env.seed(int(seed))
+        if reset_options:
+            vec_env.set_options(dict(reset_options))
         recorder = _EpisodeRecorder(record_states)
         try:  # a failing controller factory or policy must not leave the env (pybullet) open
             controller = (policy(env) if callable(policy) and not hasattr(policy, "predict")
@@ -199,12 +204,16 @@ def evaluate_on_validation_tasks(
     """:func:`evaluate_control` on ``num_tasks`` validation tasks (:data:`VALIDATION_TASK_SEED`).
 
     The one definition of the validation tasks that trainings, checkpoints and settings are
-    chosen on, so that the evaluation tasks stay unseen.
+    chosen on, so that the evaluation tasks stay unseen. On a pcc env they start from its
+    validation start distribution (``reset(options={"start": "validation"})``): the task
+    start distribution, except where every task starts from one fixed state (swing-up, the
+    arms), which validation tasks perturb; other envs start from their own start distribution.
 
     Raises:
         ValueError: ``num_tasks`` below 1.
     """
     if num_tasks < 1:
         raise ValueError(f"num_tasks must be >= 1, got {num_tasks}.")
+    options = {"start": "validation"} if env_id.startswith("pcc/") else None
     return evaluate_control(policy, env_id, task_seeds(VALIDATION_TASK_SEED, num_tasks),
-                            env_kwargs)
+                            env_kwargs, reset_options=options)

@@ -172,6 +172,15 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
         """Draw a task start state (the paper's start distribution for this domain)."""
         raise NotImplementedError
 
+    def _sample_validation_start_state(self, rng: np.random.Generator) -> np.ndarray:
+        """Draw a start state of a validation task (``reset(options={"start": "validation"})``).
+
+        The task start distribution itself, except in domains whose tasks all start from one
+        fixed state (swing-up, the arms): there, choosing anything on tasks from that state
+        would be choosing on the evaluation task, so those domains perturb it.
+        """
+        return self._sample_start_state(rng)
+
     def _is_terminal(self, state: np.ndarray) -> bool:
         """Whether the physics ends the episode (e.g. cart off the track)."""
         return False
@@ -306,11 +315,17 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
         """Start an episode.
 
         ``options={"state": s}`` starts from the true state ``s`` instead of a draw from the
-        start distribution. The first observation carries a real frame history: earlier
-        frames show the state one control period before, under zero action.
+        start distribution; ``options={"start": "validation"}`` draws from the validation
+        tasks' start distribution (:meth:`_sample_validation_start_state`), ``"task"`` (the
+        default) from the task start distribution. The first observation carries a real frame
+        history: earlier frames show the state one control period before, under zero action.
         """
         super().reset(seed=seed)
-        if options is not None and "state" in options:
+        start = _start_option(options)
+        if start == "validation":
+            state = np.asarray(self._sample_validation_start_state(self.np_random),
+                               dtype=np.float64)
+        elif options is not None and "state" in options:
             state = np.asarray(options["state"], dtype=np.float64).copy()
             if state.shape != (self.state_dim,) or not np.all(np.isfinite(state)):
                 raise ValueError(
@@ -359,3 +374,17 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
             gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array'.")
             return None
         return self.render_rgb(self.state)
+
+
+_START_OPTIONS = ("task", "validation")
+
+
+def _start_option(options: dict[str, Any] | None) -> str:
+    """The ``"start"`` reset option, checked (``"task"`` when absent)."""
+    start = (options or {}).get("start", "task")
+    if start not in _START_OPTIONS:
+        raise ValueError(f"options['start'] must be one of {_START_OPTIONS}, got {start!r}")
+    if start == "validation" and "state" in (options or {}):
+        raise ValueError("Pass either options['state'] or options['start'] = 'validation', "
+                         "not both.")
+    return str(start)

@@ -16,6 +16,8 @@ GOAL_ANGLE = np.pi / 6
 """Success when the last link's absolute angle is within ``pi / 6`` of upright ..."""
 SAMPLER_SPEED = 2.0 * np.pi
 """The data sampler draws joint velocities in ``[-2 pi, 2 pi]`` rad/s."""
+VALIDATION_ANGLE_SPREAD = np.pi / 8
+"""Validation starts: every joint of :func:`start_angles` ``+ U(-pi/8, pi/8)`` rad, at rest."""
 
 
 def start_angles(num_links: int) -> np.ndarray:
@@ -56,7 +58,9 @@ class ManipulatorEnv(ImageControlEnv):
 
     ## Starting State
     At rest in the paper's configuration :func:`start_angles`: 3 links ``(pi, 2pi/3, pi/3)``,
-    2 links ``(pi, pi/2)``. The data sampler draws every angle uniformly in ``[-pi, pi]`` and
+    2 links ``(pi, pi/2)``. Validation tasks (``reset(options={"start": "validation"})``)
+    perturb every joint of it by up to ``pi/8``, so that nothing is chosen on the one start
+    of every evaluation task. The data sampler draws every angle uniformly in ``[-pi, pi]`` and
     every joint velocity in ``[-2 pi, 2 pi]``.
 
     Why these choices: the paper gives the start state and the goal, but neither the
@@ -136,6 +140,11 @@ class ManipulatorEnv(ImageControlEnv):
 
     def _sample_start_state(self, rng: np.random.Generator) -> np.ndarray:
         return np.concatenate([start_angles(self.num_links), np.zeros(self.num_links)])
+
+    def _sample_validation_start_state(self, rng: np.random.Generator) -> np.ndarray:
+        angles = start_angles(self.num_links) + rng.uniform(
+            -VALIDATION_ANGLE_SPREAD, VALIDATION_ANGLE_SPREAD, self.num_links)
+        return np.concatenate([wrap_angle(angles), np.zeros(self.num_links)])
 
     def state_error(self, state: np.ndarray, goal: np.ndarray | None = None) -> np.ndarray:
         """``state - goal`` with the joint angles wrapped to ``[-pi, pi)`` (batched)."""

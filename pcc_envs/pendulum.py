@@ -13,6 +13,10 @@ __all__ = ["PendulumEnv"]
 _TASKS = ("swingup", "balance")
 GOAL_ANGLE = np.pi / 6
 """Success when ``|theta| <= pi / 6``."""
+VALIDATION_ANGLE_SPREAD = np.pi / 8
+"""Swing-up validation starts: hanging ``+ U(-pi/8, pi/8)`` rad ..."""
+VALIDATION_RATE_SPREAD = 0.5
+"""... moving at ``U(-0.5, 0.5)`` rad/s (every evaluation task starts exactly hanging at rest)."""
 
 
 class PendulumEnv(ImageControlEnv):
@@ -40,9 +44,10 @@ class PendulumEnv(ImageControlEnv):
     while ``|theta| <= pi/6``.
 
     ## Starting State
-    Swing-up: hanging down at rest, ``(pi, 0)`` (stored wrapped, ``-pi``). Balance: ``theta``
-    uniform in ``[-pi/6, pi/6]``, at rest. The data sampler draws ``theta`` uniform in
-    ``[-pi, pi]`` and ``theta_dot`` uniform in ``[-3 pi, 3 pi]``.
+    Swing-up: hanging down at rest, ``(pi, 0)`` (stored wrapped, ``-pi``); its validation
+    tasks (``reset(options={"start": "validation"})``) start within ``pi/8`` of hanging, at
+    up to 0.5 rad/s. Balance: ``theta`` uniform in ``[-pi/6, pi/6]``, at rest. The data
+    sampler draws ``theta`` uniform in ``[-pi, pi]`` and ``theta_dot`` uniform in ``[-3 pi, 3 pi]``.
 
     ## Episode End
     Truncation after 400 steps (8 s, set by the registration). Never terminates.
@@ -104,6 +109,13 @@ class PendulumEnv(ImageControlEnv):
         if self.task == "balance":
             return np.array([rng.uniform(-GOAL_ANGLE, GOAL_ANGLE), 0.0])
         return np.array([wrap_angle(np.pi), 0.0])
+
+    def _sample_validation_start_state(self, rng: np.random.Generator) -> np.ndarray:
+        if self.task == "balance":
+            return self._sample_start_state(rng)
+        angle = np.pi + rng.uniform(-VALIDATION_ANGLE_SPREAD, VALIDATION_ANGLE_SPREAD)
+        return np.array([wrap_angle(angle),
+                         rng.uniform(-VALIDATION_RATE_SPREAD, VALIDATION_RATE_SPREAD)])
 
     def state_error(self, state: np.ndarray, goal: np.ndarray | None = None) -> np.ndarray:
         """``state - goal`` with the angle wrapped to ``[-pi, pi)`` (batched)."""

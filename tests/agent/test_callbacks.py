@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import gymnasium as gym
+import numpy as np
 import pytest
 import torch
 
@@ -123,6 +124,24 @@ def test_validation_task_score_plans_on_the_validation_tasks(tmp_path):
     agent = tiny_agent(tmp_path, epochs=1).learn(total_timesteps=200)
     value = validation_task_score(ENV_ID, num_tasks=1)(agent)
     assert 0.0 <= value <= 100.0
+
+
+def test_validation_tasks_start_from_the_validation_starts():
+    from pcc_agent.evaluation import evaluate_control, evaluate_on_validation_tasks
+
+    class ZeroTorque:
+        def predict(self, obs, state=None, episode_start=None, deterministic=True):
+            return np.zeros((len(obs), 1), dtype=np.float32), state
+
+    zero = ZeroTorque()
+    env_id = "pcc/PendulumSwingUp-v0"  # every evaluation task starts hanging at rest
+    validation = evaluate_on_validation_tasks(zero, env_id, num_tasks=2)
+    starts = [t.states[0] for t in validation.tasks]
+    assert not np.allclose(starts[0], starts[1])
+    assert all(abs(abs(s[0]) - np.pi) <= np.pi / 8 + 0.05 for s in starts)  # one step on
+    seeds = [t.seed for t in validation.tasks]
+    plain = evaluate_control(zero, env_id, seeds)
+    assert all(np.allclose(t.states[0], [-np.pi, 0.0]) for t in plain.tasks)
 
 
 @pytest.mark.parametrize("kwargs, error", [

@@ -143,6 +143,31 @@ def test_reset_from_state_option(env_id):
     env.close()
 
 
+FIXED_START = ("pcc/PendulumSwingUp-v0", "pcc/TwoLink-v0", "pcc/ThreeLink-v0")
+
+
+@pytest.mark.parametrize("env_id", ORACLE)
+def test_validation_starts_differ_from_a_fixed_task_start_only(env_id):
+    env = _make(env_id)
+    tasks = [env.reset(seed=s)[1]["state"] for s in range(3)]
+    checks = [env.reset(seed=s, options={"start": "task"})[1]["state"] for s in range(3)]
+    validation = [env.reset(seed=s, options={"start": "validation"})[1]["state"]
+                  for s in range(3)]
+    np.testing.assert_array_equal(tasks, checks)
+    if env_id in FIXED_START:  # one task start; validation starts near it, all different
+        assert all(np.array_equal(t, tasks[0]) for t in tasks)
+        errors = np.abs(env.unwrapped.state_error(np.array(validation), tasks[0]))
+        assert np.all(errors.max(axis=1) > 0) and len({v.tobytes() for v in validation}) == 3
+        assert np.all(errors[:, 0] <= np.pi / 8 + 1e-12)
+    else:  # the task start distribution itself, the same draw per seed
+        np.testing.assert_array_equal(validation, tasks)
+    with pytest.raises(ValueError, match="start"):
+        env.reset(options={"start": "test"})
+    with pytest.raises(ValueError, match="not both"):
+        env.reset(options={"start": "validation", "state": tasks[0]})
+    env.close()
+
+
 @pytest.mark.parametrize("env_id", ORACLE)
 def test_start_and_goal_inside_the_sampler_box(env_id):
     env = _make(env_id).unwrapped
