@@ -30,3 +30,25 @@ def test_committed_summary_markdown_is_rendered_by_the_code(tmp_path):
     shutil.copytree(REPRODUCE / "runs", tmp_path / "runs")
     write_summary(tmp_path)
     assert (tmp_path / "summary.md").read_text() == (REPRODUCE / "summary.md").read_text()
+
+
+#: The repository's budget for committed weights (issue #38): every Planar and CartPole model,
+#: the best model of the other rows.
+WEIGHTS_BUDGET_BYTES = 40 * 1024**2
+
+
+def test_committed_weights_fit_the_budget_and_match_their_records():
+    import hashlib
+
+    weights = sorted((REPRODUCE / "weights").rglob("*.safetensors"))
+    assert weights, "no committed weights"
+    total = sum(path.stat().st_size for path in weights)
+    assert total <= WEIGHTS_BUDGET_BYTES, f"{total / 1024**2:.1f} MB of weights, budget 40 MB"
+    named = {}
+    for record_path in (REPRODUCE / "runs").rglob("*.json"):
+        entry = json.loads(record_path.read_text()).get("weights")
+        if entry:
+            named[REPRODUCE / entry["file"]] = entry["sha256"]
+    for path in weights:
+        assert path in named, f"{path} is named by no record"
+        assert hashlib.sha256(path.read_bytes()).hexdigest() == named[path], path
