@@ -609,6 +609,15 @@ def cpu_flags() -> frozenset[str]:
     return frozenset()
 
 
+def simd_flags() -> tuple[str, ...]:
+    """The CPU's vector-instruction flags (``avx*``, ``amx*``, ``fma``), sorted.
+
+    Kernels for different instruction sets round differently, so results are bit-identical
+    only between hosts with the same flags (and torch CPU capability).
+    """
+    return tuple(sorted(flag for flag in cpu_flags() if flag.startswith(("avx", "amx", "fma"))))
+
+
 def native_bf16(device: torch.device | str = "cpu") -> bool:
     """Whether ``device`` multiplies bfloat16 in hardware.
 

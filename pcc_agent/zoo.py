@@ -4,8 +4,10 @@ Each entry is a model of a committed benchmark row, stored as float16 control-on
 safetensors weights (the encoder and the latent dynamics, all that planning uses; see
 :mod:`pcc_agent.checkpoint`) inside the package (``pcc_agent/pretrained/``). Its
 ``percentages`` are those measured with that very file on the env's 10 evaluation tasks,
-so evaluating it reproduces them (exactly on the CPU that measured them; a CPU with other
-vector instructions may round differently).
+so evaluating it reproduces them exactly on a CPU with the same vector instructions as the
+one that measured them (:meth:`PretrainedModel.measured_on_this_cpu`). Other CPUs round
+differently, and a swing-up is sensitive to it: ``pendulum-swingup-pcc`` scores 80.75 % on
+every task on an AMD EPYC with AVX-512 against 93.75 % on the Intel Xeon that recorded it.
 
 Example:
     >>> from pcc_agent.zoo import load_pretrained
@@ -44,7 +46,9 @@ class PretrainedModel:
         source: The committed record it is the model of, and the command that trained it.
         machine: The CPU that measured ``percentages``.
         torch_cpu_capability: Torch's CPU kernel level on that machine
-            (``torch.backends.cpu.get_cpu_capability()``); the same level rounds the same.
+            (``torch.backends.cpu.get_cpu_capability()``).
+        simd_flags: That CPU's vector-instruction flags (:func:`pcc_agent.training.simd_flags`):
+            with the kernel level, what decides how the arithmetic rounds.
     """
 
     name: str
@@ -57,12 +61,29 @@ class PretrainedModel:
     source: str
     machine: str
     torch_cpu_capability: str
+    simd_flags: tuple[str, ...]
+
+    def measured_on_this_cpu(self) -> bool:
+        """Whether this CPU rounds as the one that measured ``percentages`` (same kernels)."""
+        import torch
+
+        from pcc_agent.training import simd_flags
+
+        return (torch.backends.cpu.get_cpu_capability() == self.torch_cpu_capability
+                and simd_flags() == self.simd_flags)
 
     @property
     def mean(self) -> float:
         """Mean % in goal over the evaluation tasks."""
         return sum(self.percentages) / len(self.percentages)
 
+
+#: The vector-instruction flags of the 2-core Intel Xeon that measured the shipped agents
+#: (``machine.simd_flags`` of their records).
+_INTEL_XEON_AMX_FLAGS = (
+    "amx_bf16", "amx_int8", "amx_tile", "avx", "avx2", "avx512_bf16", "avx512_bitalg",
+    "avx512_fp16", "avx512_vbmi2", "avx512_vnni", "avx512_vpopcntdq", "avx512bw", "avx512cd",
+    "avx512dq", "avx512f", "avx512ifma", "avx512vbmi", "avx512vl", "avx_vnni", "fma")
 
 #: The shipped agents, one row each.
 PRETRAINED: dict[str, PretrainedModel] = {
@@ -80,6 +101,7 @@ PRETRAINED: dict[str, PretrainedModel] = {
                    "(`pcc reproduce`, the quick preset, model 0; 250 epochs on one core)",
             machine="2-core Intel Xeon (AVX-512, AMX)",
             torch_cpu_capability="AVX512",
+            simd_flags=_INTEL_XEON_AMX_FLAGS,
         ),
         PretrainedModel(
             name="pendulum-swingup-pcc",
@@ -94,6 +116,7 @@ PRETRAINED: dict[str, PretrainedModel] = {
                    "paper --max-epochs 150 --flush-denormals`, model 0; 45 min on one core)",
             machine="2-core Intel Xeon (AVX-512, AMX)",
             torch_cpu_capability="AVX512",
+            simd_flags=_INTEL_XEON_AMX_FLAGS,
         ),
     )
 }

@@ -87,15 +87,14 @@ def machine_info() -> dict[str, Any]:
     """
     import torch
 
-    from pcc_agent.training import cpu_flags
+    from pcc_agent.training import simd_flags
 
-    simd = sorted(flag for flag in cpu_flags() if flag.startswith(("avx", "amx", "fma")))
     return {
         "platform": platform.platform(),
         "cpu": cpu_name(),
         "cpu_count": os.cpu_count(),
         "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
-        "simd_flags": simd,
+        "simd_flags": list(simd_flags()),
     }
 
 

@@ -83,8 +83,9 @@ def batch_run(agent):
 
 # Recorded with the code before the refactor (see the module docstring), one torch thread,
 # by test_print_actions. The refactored agent encodes the goal alone (cached) rather than in
-# one batch with the observations, which moves latents by float32 rounding (~1e-8): hence
-# the tolerance.
+# one batch with the observations, which moves latents by float32 rounding (~1e-8), and a
+# CPU with other vector instructions rounds differently (up to 2.3e-5 on an AMD EPYC with
+# AVX-512 against these values): hence the tolerance, far below what a planning change moves.
 EVERY_STEP = [[-0.09385429, 0.10689044], [-0.17626631, 0.17392623],
               [-0.1760803, 0.17375527], [-0.1749684, 0.17284745]]
 EVERY_TWO = [[-0.09385429, 0.10689044], [-0.17235288, 0.17033793],
@@ -93,6 +94,9 @@ EVERY_TWO = [[-0.09385429, 0.10689044], [-0.17235288, 0.17033793],
 BATCH = [[[-0.092655584, 0.105315864], [-0.0928255, 0.106141135]],
          [[-0.17318334, 0.17088898], [-0.177044, 0.17524119]],
          [[-0.17482035, 0.17266247], [-0.09537174, 0.10808598]]]
+
+
+ATOL = 1e-4
 
 
 def test_print_actions(weights):  # PCC_PIN_PRINT=1 pytest -s: how the values were recorded
@@ -104,13 +108,13 @@ def test_print_actions(weights):  # PCC_PIN_PRINT=1 pytest -s: how the values we
 
 
 def test_predict_pinned_replanning_every_step(weights):
-    np.testing.assert_allclose(closed_loop(agent_with(weights, 1)), EVERY_STEP, atol=1e-6)
+    np.testing.assert_allclose(closed_loop(agent_with(weights, 1)), EVERY_STEP, atol=ATOL)
 
 
 def test_predict_pinned_replanning_every_two_steps(weights):
     np.testing.assert_allclose(closed_loop(agent_with(weights, 2), steps=5), EVERY_TWO,
-                               atol=1e-6)
+                               atol=ATOL)
 
 
 def test_predict_pinned_batch_with_episode_start(weights):
-    np.testing.assert_allclose(batch_run(agent_with(weights, 1)), BATCH, atol=1e-6)
+    np.testing.assert_allclose(batch_run(agent_with(weights, 1)), BATCH, atol=ATOL)
