@@ -128,8 +128,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(terminal_table(["task", "seed", agent.method, "oracle", "no action"], rows))
     if shipped is not None and args.env is None and not args.noise and seeds == task_seeds(
             shipped.task_seed, len(shipped.percentages)):
+        same_cpu = ("" if shipped.measured_on_this_cpu() else
+                    " This CPU's vector instructions differ from that one's, so it rounds "
+                    "differently and its scores may differ.")
         print(textwrap.fill(f"Shipped with {shipped.mean:.1f} % on these tasks, measured on a "
-                            f"{shipped.machine}. It is the model of {shipped.source}.", 100))
+                            f"{shipped.machine}.{same_cpu} It is the model of "
+                            f"{shipped.source}.", 100))
     if all(v is None for v in references.values()):
         print("No oracle or no-action records of these tasks (the references are kept for the "
               f"{_PAPER.num_tasks}\nevaluation tasks) in --references-dir {args.references_dir}")
