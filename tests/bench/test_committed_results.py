@@ -38,7 +38,7 @@ WEIGHTS_BUDGET_BYTES = 40 * 1024**2
 
 
 def test_committed_weights_fit_the_budget_and_match_their_records():
-    import hashlib
+    from pcc_agent.io import sha256_of
 
     weights = sorted((REPRODUCE / "weights").rglob("*.safetensors"))
     assert weights, "no committed weights"
@@ -51,4 +51,4 @@ def test_committed_weights_fit_the_budget_and_match_their_records():
             named[REPRODUCE / entry["file"]] = entry["sha256"]
     for path in weights:
         assert path in named, f"{path} is named by no record"
-        assert hashlib.sha256(path.read_bytes()).hexdigest() == named[path], path
+        assert sha256_of(path) == named[path], path
