@@ -206,8 +206,9 @@ def evaluate_on_validation_tasks(
     The one definition of the validation tasks that trainings, checkpoints and settings are
     chosen on, so that the evaluation tasks stay unseen. On a pcc env they start from its
     validation start distribution (``reset(options={"start": "validation"})``): the task
-    start distribution, except where every task starts from one fixed state (swing-up, the
-    arms), which validation tasks perturb; other envs start from their own start distribution.
+    start distribution, except where the tasks have one or two fixed starts (swing-up, the
+    arms, lane keeping), which validation tasks perturb; other envs start from their own
+    start distribution.
 
     Raises:
         ValueError: ``num_tasks`` below 1.

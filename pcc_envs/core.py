@@ -177,7 +177,8 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
 
         The task start distribution itself, except in domains whose tasks all start from one
         fixed state (swing-up, the arms): there, choosing anything on tasks from that state
-        would be choosing on the evaluation task, so those domains perturb it.
+        would be choosing on the evaluation task, so those domains perturb it. (Lane keeping
+        perturbs its two starts in its own ``reset``: they come from a drift, not a draw.)
         """
         return self._sample_start_state(rng)
 

@@ -52,6 +52,10 @@ class LaneKeepingParams:
             this many frames apart (the paper: 7).
         drift_steps: Forced full-lock steps that :meth:`LaneKeepingEnv.reset` rolls before
             the agent takes over (the paper: 20).
+        validation_drift_steps: The drift lengths a validation task draws from
+            (``reset(options={"start": "validation"})``): near ``drift_steps`` but never
+            equal, since the tasks have only two starts (full left or full right) and
+            choosing anything on those starts would be choosing on the evaluation tasks.
         wheel_force: Torque limit of the wheel velocity servos, N m.
         steering_force: Torque limit of the steering position servos, N m.
         yaw_rate_gain: Yaw rate at the start of a period as a fraction of the kinematic
@@ -68,12 +72,21 @@ class LaneKeepingParams:
     frame_dt: float = 0.01
     frames_per_step: int = 7
     drift_steps: int = 20
+    validation_drift_steps: tuple[int, ...] = (14, 15, 16, 17, 18, 22, 23, 24, 25, 26)
     wheel_force: float = 10.0
     steering_force: float = 10.0
     yaw_rate_gain: float = 0.2
     road_start: float = -5.0
     road_end: float = 200.0
     camera: CameraParams = field(default_factory=CameraParams)
+
+    def __post_init__(self) -> None:
+        lengths = self.validation_drift_steps
+        if not lengths or self.drift_steps in lengths or min(lengths) < 0:
+            raise ValueError(
+                "validation_drift_steps must be non-negative step counts that leave out "
+                f"drift_steps ({self.drift_steps}), got {lengths!r}"
+            )
 
     @property
     def unit(self) -> float:
@@ -511,7 +524,8 @@ class LaneKeepingEnv(ImageControlEnv):
             seed: Seeds ``self.np_random`` (drift direction and process noise).
             options: ``{"state": s}`` places the car at ``s = (offset, heading, speed)``
                 with no drift; ``{"drift": +1 | -1}`` fixes the drift direction (full left
-                or full right) instead of drawing it.
+                or full right) instead of drawing it; ``{"start": "validation"}`` draws the
+                drift's length from ``params.validation_drift_steps``.
 
         Returns:
             The first observation (after the drift) and the ``info`` dict.
@@ -524,7 +538,10 @@ class LaneKeepingEnv(ImageControlEnv):
             direction = float(self.np_random.choice([-1.0, 1.0]))
         elif direction not in (-1, 1):
             raise ValueError(f"options['drift'] must be +1 (left) or -1 (right), got {direction!r}")
-        for _ in range(self.params.drift_steps):
+        steps = self.params.drift_steps
+        if (options or {}).get("start") == "validation":
+            steps = int(self.np_random.choice(self.params.validation_drift_steps))
+        for _ in range(steps):
             obs, *_ = self.step(np.array([direction], dtype=np.float32))
         self._steps = 0
         self._steps_in_goal = 0

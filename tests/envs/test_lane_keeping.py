@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import pcc_envs  # noqa: F401
-from pcc_envs.lane_keeping import LaneKeepingEnv
+from pcc_envs.lane_keeping import LaneKeepingEnv, LaneKeepingParams
 
 ENV_ID = "pcc/LaneKeeping-v0"
 UNIT = 3.6 / 18.0
@@ -120,6 +120,26 @@ def test_forced_drift_moves_car_off_centre(env: LaneKeepingEnv, direction: int) 
 def test_random_drift_direction_uses_seed(env: LaneKeepingEnv) -> None:
     signs = {np.sign(env.reset(seed=seed)[1]["state"][0]) for seed in range(8)}
     assert signs == {-1.0, 1.0}
+
+
+def test_validation_starts_lie_near_not_at_the_two_task_starts(env: LaneKeepingEnv) -> None:
+    tasks = {env.reset(options={"drift": d})[1]["state"].tobytes() for d in (-1, 1)}
+    starts = [env.reset(seed=s, options={"start": "validation"})[1]["state"] for s in range(6)]
+    again = env.reset(seed=3, options={"start": "validation"})[1]["state"]
+    np.testing.assert_array_equal(again, starts[3])
+    assert not tasks & {s.tobytes() for s in starts}
+    offsets = np.abs([s[0] for s in starts])
+    task_offset = abs(np.frombuffer(next(iter(tasks)))[0])
+    assert np.all((offsets > 0.4 * task_offset) & (offsets < 2.0 * task_offset))
+    assert np.all(offsets < 0.5 * 3.6), "validation starts must leave the car inside the lane"
+    np.testing.assert_array_equal(env.reset(seed=3)[1]["state"],
+                                  env.reset(seed=3, options={"start": "task"})[1]["state"])
+
+
+@pytest.mark.parametrize("lengths", [(), (18, 20), (-1, 22)])
+def test_validation_drift_lengths_must_leave_out_the_task_drift(lengths: tuple) -> None:
+    with pytest.raises(ValueError, match="validation_drift_steps"):
+        LaneKeepingParams(validation_drift_steps=lengths)
 
 
 def test_centre_steering_stays_near_centre(env: LaneKeepingEnv) -> None:
