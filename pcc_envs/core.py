@@ -78,6 +78,12 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
         reward_type: ``"dense"`` (negative weighted squared state error to the goal, see
             :meth:`reward`) or ``"sparse"`` (``1`` when the true state is in the goal region).
         render_mode: ``None`` or ``"rgb_array"`` (a larger, human-friendly picture).
+        frame_gap: Control periods between consecutive stacked frames (default 1: the
+            paper's consecutive frames). A larger gap shows more motion between the frames
+            (e.g. an arm's outer joints, which move under a pixel per 20 ms period), while
+            the dynamics, tasks and goal stay the same; an observation then spans
+            ``(num_frames - 1) * frame_gap`` periods. Only for domains with
+            ``num_frames >= 2``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 50}
@@ -101,6 +107,7 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
         noise_std: float = 0.0,
         reward_type: str = "dense",
         render_mode: str | None = None,
+        frame_gap: int = 1,
     ) -> None:
         if not np.isfinite(noise_std) or noise_std < 0:
             raise ValueError(f"noise_std must be a finite number >= 0, got {noise_std!r}")
@@ -111,6 +118,15 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
                 f"render_mode must be None or one of {self.metadata['render_modes']}, "
                 f"got {render_mode!r}"
             )
+        if isinstance(frame_gap, bool) or not isinstance(frame_gap, (int, np.integer)) or (
+                frame_gap < 1):
+            raise ValueError(f"frame_gap must be an integer >= 1, got {frame_gap!r}")
+        if frame_gap > 1 and self.num_frames < 2:
+            raise ValueError(f"frame_gap {frame_gap} needs stacked frames; "
+                             f"{type(self).__name__} observes {self.num_frames} frame")
+        self.frame_gap = int(frame_gap)
+        #: Frames the env keeps: every period of the span of one observation.
+        self.history_length = (self.num_frames - 1) * self.frame_gap + 1
         self.noise_std = float(noise_std)
         self.reward_type = reward_type
         self.render_mode = render_mode
@@ -241,17 +257,21 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
     def observation_of(self, state: np.ndarray) -> np.ndarray:
         """The observation an agent would see at ``state`` after a zero-action history.
 
-        Earlier frames show the state integrated backward by one control period per frame
-        under zero action, so the frame pair carries the state's velocity.
+        Earlier frames show the state integrated backward by ``frame_gap`` control periods
+        per frame under zero action, so the frame pair carries the state's velocity.
         """
         return self.observations_of(np.asarray(state, dtype=np.float64)[None])[0]
 
     def observations_of(self, states: np.ndarray) -> np.ndarray:
         """Batched :meth:`observation_of`: ``(N, state_dim)`` -> ``uint8 (N, frames, H, W)``."""
+        return stack_frames(self._history_frames(states)[:: self.frame_gap])
+
+    def _history_frames(self, states: np.ndarray) -> list[np.ndarray]:
+        """The ``history_length`` frames up to ``states`` under a zero-action past, oldest first."""
         history = [np.asarray(states, dtype=np.float64)]
-        while len(history) < self.num_frames:
+        while len(history) < self.history_length:
             history.insert(0, self._previous_state(history[0]))
-        return stack_frames([self.render_states(s) for s in history])
+        return [self.render_states(s) for s in history]
 
     def goal_observation(self) -> np.ndarray:
         """Observation of the goal state: the planner's target."""
@@ -300,7 +320,7 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
         return arr
 
     def _observation(self) -> np.ndarray:
-        return stack_frames(self._frames)
+        return stack_frames(self._frames[:: self.frame_gap])
 
     def _info(self, in_goal: bool) -> dict[str, Any]:
         return {
@@ -336,7 +356,7 @@ class ImageControlEnv(gym.Env[np.ndarray, np.ndarray]):
         else:
             state = np.asarray(self._sample_start_state(self.np_random), dtype=np.float64)
         self._state = state
-        self._frames = list(self.observation_of(state))
+        self._frames = [frames[0] for frames in self._history_frames(state[None])]
         self._steps = 0
         self._steps_in_goal = 0
         return self._observation(), self._info(self.in_goal(state))

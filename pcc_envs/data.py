@@ -15,6 +15,9 @@ the state box (``env.sample_states``), random actions ``u_0 .. u_{F-1}`` give
 
 With ``F = 2`` this is ``x_t = (s_0, s_1)``, ``x_{t+1} = (s_1, s_2)``, the stored action
 ``u_1``. Everything is vectorized over samples (batched dynamics and rendering, in chunks).
+An env made with ``frame_gap = g > 1`` stacks every ``g``-th state of a chain of
+``(F - 1) g + 1`` random steps: ``x_t = (s_0, s_g, ...)``, ``x_{t+1} = (s_1, s_{g+1}, ...)``,
+the stored state, action and next state the chain's last step, as above.
 
 Stored actions are the normalized ``float32`` actions in ``[-1, 1]``; the dynamics were
 stepped with exactly these ``float32`` values.
@@ -208,7 +211,8 @@ def collect_transitions(
     wrapped = _make_env(env_id, noise_std, env_kwargs)
     env: ImageControlEnv = wrapped.unwrapped
     try:
-        frames = env.num_frames
+        frames, gap = env.num_frames, env.frame_gap
+        steps = env.history_length  # the periods one observation spans, plus one
         arrays = {
             "obs": np.empty((num_samples, *env.observation_space.shape), dtype=np.uint8),
             "action": np.empty((num_samples, env.action_dim), dtype=np.float32),
@@ -221,14 +225,14 @@ def collect_transitions(
             rows = slice(start, start + n)
             states = [env.sample_states(rng, n)]
             actions = []
-            for _ in range(frames):
+            for _ in range(steps):
                 action = env.sample_action(rng, n).astype(np.float32)
                 nxt = env.transition(states[-1], action.astype(np.float64))
                 states.append(env.add_process_noise(nxt, rng))
                 actions.append(action)
             images = [env.render_states(s) for s in states]
-            stack_frames(images[:frames], out=arrays["obs"][rows])
-            stack_frames(images[1:], out=arrays["next_obs"][rows])
+            stack_frames(images[:steps:gap], out=arrays["obs"][rows])
+            stack_frames(images[1::gap], out=arrays["next_obs"][rows])
             arrays["action"][rows] = actions[-1]
             arrays["state"][rows] = states[-2]
             arrays["next_state"][rows] = states[-1]

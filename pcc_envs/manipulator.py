@@ -79,7 +79,9 @@ class ManipulatorEnv(ImageControlEnv):
 
     ## Arguments
     ``num_links`` (2 or 3; any ``N >= 1`` works), ``max_torque`` (one value per joint, or
-    ``None`` for the defaults), ``noise_std``, ``reward_type``, ``render_mode``.
+    ``None`` for the defaults), ``noise_std``, ``reward_type``, ``render_mode``,
+    ``frame_gap`` (control periods between the two frames, default 1; see
+    :class:`pcc_envs.core.ImageControlEnv`).
 
     >>> import gymnasium as gym
     >>> import pcc_envs  # noqa: F401
@@ -104,6 +106,7 @@ class ManipulatorEnv(ImageControlEnv):
         noise_std: float = 0.0,
         reward_type: str = "dense",
         render_mode: str | None = None,
+        frame_gap: int = 1,
     ) -> None:
         torque = None if max_torque is None else tuple(np.atleast_1d(max_torque).tolist())
         self.params = ArmParams(num_links=int(num_links), max_torque=torque)
@@ -115,7 +118,8 @@ class ManipulatorEnv(ImageControlEnv):
         self.state_high = -self.state_low
         self.goal_state = np.zeros(2 * n)
         self.reward_weights = np.concatenate([np.ones(n), np.full(n, 0.1)])
-        super().__init__(noise_std=noise_std, reward_type=reward_type, render_mode=render_mode)
+        super().__init__(noise_std=noise_std, reward_type=reward_type, render_mode=render_mode,
+                         frame_gap=frame_gap)
 
     def _xdot(self, state: np.ndarray, action: np.ndarray) -> np.ndarray:
         return arm_xdot(state, action, self.params)

@@ -68,6 +68,24 @@ def test_env_kwargs_reach_the_env():
     assert weak.metadata["env_kwargs"] == {"max_torque": 0.1}
 
 
+def test_frame_gap_stacks_every_gth_state_of_the_chain():
+    gap = 3
+    data = collect_transitions("pcc/TwoLink-v0", 20, seed=0, env_kwargs={"frame_gap": gap})
+    env = gym.make("pcc/TwoLink-v0", frame_gap=gap).unwrapped
+    np.testing.assert_array_equal(data.obs[:, -1], env.render_states(data.state))
+    np.testing.assert_array_equal(data.next_obs[:, -1], env.render_states(data.next_state))
+    np.testing.assert_allclose(data.next_state, env.transition(data.state, data.action), atol=1e-12)
+    # The older frame of the next observation is one period after the older frame of this one:
+    # it is not this observation's newer frame, which lies gap periods later.
+    assert np.any(data.obs[:, 1] != data.next_obs[:, 0])
+    assert data.metadata["env_kwargs"] == {"frame_gap": gap}
+    # A gap of 1 is the paper's protocol, sample for sample.
+    plain = collect_transitions("pcc/TwoLink-v0", 20, seed=0)
+    same = collect_transitions("pcc/TwoLink-v0", 20, seed=0, env_kwargs={"frame_gap": 1})
+    np.testing.assert_array_equal(plain.obs, same.obs)
+    np.testing.assert_array_equal(plain.next_state, same.next_state)
+
+
 def test_cache_roundtrip_and_keys(tmp_path):
     first = load_or_collect("pcc/Planar-v0", 64, seed=0, cache_dir=tmp_path)
     files = sorted(tmp_path.iterdir())

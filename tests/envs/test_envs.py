@@ -143,6 +143,36 @@ def test_reset_from_state_option(env_id):
     env.close()
 
 
+def test_frame_gap_shows_the_state_gap_periods_before():
+    gap = 3
+    env = _make("pcc/ThreeLink-v0", frame_gap=gap).unwrapped
+    assert env.history_length == 4 and env.observation_space.shape == (2, 80, 80)
+    obs, info = env.reset(seed=0, options={"start": "validation"})
+    np.testing.assert_array_equal(obs, env.observation_of(info["state"]))
+    rng = np.random.default_rng(0)
+    states = [info["state"]]
+    for _ in range(5):
+        obs, *_, info = env.step(rng.uniform(-1, 1, 3).astype(np.float32))
+        states.append(info["state"])
+    np.testing.assert_array_equal(obs[0], env.render_state(states[-1 - gap]))
+    np.testing.assert_array_equal(obs[1], env.render_state(states[-1]))
+    one = _make("pcc/ThreeLink-v0").unwrapped
+    assert one.frame_gap == 1 and one.history_length == 2
+
+
+@pytest.mark.parametrize("gap", [0, 1.5, True, "2"])
+def test_bad_frame_gap_raises(gap):
+    with pytest.raises(ValueError, match="frame_gap must be an integer"):
+        _make("pcc/TwoLink-v0", frame_gap=gap)
+
+
+def test_frame_gap_needs_stacked_frames():
+    from pcc_envs.core import ImageControlEnv
+
+    with pytest.raises(ValueError, match="frame_gap 2 needs stacked frames"):
+        ImageControlEnv(frame_gap=2)  # the base class observes one frame
+
+
 FIXED_START = ("pcc/PendulumSwingUp-v0", "pcc/TwoLink-v0", "pcc/ThreeLink-v0")
 
 
