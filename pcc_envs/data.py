@@ -211,7 +211,7 @@ def collect_transitions(
     wrapped = _make_env(env_id, noise_std, env_kwargs)
     env: ImageControlEnv = wrapped.unwrapped
     try:
-        frames, gap = env.num_frames, env.frame_gap
+        gap = env.frame_gap
         steps = env.history_length  # the periods one observation spans, plus one
         arrays = {
             "obs": np.empty((num_samples, *env.observation_space.shape), dtype=np.uint8),
