@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from pcc_envs.core import ImageControlEnv, wrap_angle
+from pcc_envs.core import ImageControlEnv, _start_option, wrap_angle
 from pcc_envs.lane_render import CameraParams, camera_frames, render_road_masks
 
 __all__ = ["LaneKeepingEnv", "LaneKeepingParams"]
@@ -539,7 +539,7 @@ class LaneKeepingEnv(ImageControlEnv):
         elif direction not in (-1, 1):
             raise ValueError(f"options['drift'] must be +1 (left) or -1 (right), got {direction!r}")
         steps = self.params.drift_steps
-        if (options or {}).get("start") == "validation":
+        if _start_option(options) == "validation":
             steps = int(self.np_random.choice(self.params.validation_drift_steps))
         for _ in range(steps):
             obs, *_ = self.step(np.array([direction], dtype=np.float32))
