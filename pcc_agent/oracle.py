@@ -76,6 +76,7 @@ ORACLE_CONFIGS: dict[str, OracleConfig] = {
     # 91.5% vs 89.0% (3-link) at T = 60; a heavy rate weight slows the pumping swing-up.
     "pcc/TwoLink-v0": OracleConfig(state_weights=(1.0, 1.0, 0.01, 0.01)),
     "pcc/ThreeLink-v0": OracleConfig(state_weights=(1.0, 1.0, 1.0, 0.01, 0.01, 0.01)),
+    "pcc/ThreeLink-v1": OracleConfig(state_weights=(1.0, 1.0, 1.0, 0.01, 0.01, 0.01)),
     # Lateral offset (m), heading (rad), speed (m/s; held by the wheel servos, not steerable).
     # Bullet's contacts make the re-posed map rough at small scales: a 1 mm / 1 mrad step.
     "pcc/LaneKeeping-v0": OracleConfig(state_weights=(1.0, 1.0, 0.0), fd_step=1e-3),

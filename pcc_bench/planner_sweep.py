@@ -11,9 +11,11 @@ Two modes:
   is not repeated.
 
 Settings are never chosen on the evaluation tasks: the tasks are drawn from
-``--task-seed`` (default 2021, a validation split), and the evaluation tasks' seed (2020,
-``pcc_bench.presets``) is refused unless ``--allow-evaluation-tasks`` is given (to report,
-never to choose).
+``--task-seed`` (default 2021, a validation split) and start from the env's validation starts
+(``reset(options={"start": "validation"})``, which perturb the one start of swing-up and the
+arms); the evaluation tasks' seed (2020, ``pcc_bench.presets``) is refused unless
+``--allow-evaluation-tasks`` is given (to report, never to choose), and only it starts from
+the task starts.
 
 Examples:
     python -m pcc_bench.planner_sweep --oracle pcc/CartPole-v0 --plan-lengths 10 50
@@ -117,6 +119,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     torch.set_num_threads(1)
     seeds = task_seeds(args.task_seed, args.num_tasks)
+    # Tasks of other seeds than the evaluation tasks' start from the validation starts: where
+    # every task starts from one state (swing-up, the arms), another seed alone would replay
+    # the evaluation task.
+    starts = "task" if args.task_seed == evaluation_seed else "validation"
     if args.oracle:
         from pcc_agent.oracle import OracleController, agent_planner_for, oracle_config_for
 
@@ -131,6 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         env_id, method, env_kwargs = agent.env_id, agent.method, agent.env_kwargs
         base_planner = agent.planner
         weight_grid = [None]
+    options = {"start": starts} if env_id.startswith("pcc/") else None
     try:
         configs = settings_grid(base_planner, args)
     except ValueError as error:  # PlannerConfig refuses an inconsistent combination
@@ -142,16 +149,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             oracle = dataclasses.replace(oracle_base, state_weights=weights)
             result = evaluate_control(
                 lambda env, o=oracle, p=planner: OracleController(env, o, p),
-                env_id, seeds, env_kwargs, record_states=False)
+                env_id, seeds, env_kwargs, record_states=False, reset_options=options)
         else:
             agent.set_planner(planner)  # also restarts the planner's draws from the seed
-            result = evaluate_control(agent, env_id, seeds, env_kwargs, record_states=False)
+            result = evaluate_control(agent, env_id, seeds, env_kwargs, record_states=False,
+                                      reset_options=options)
         row = {
             "env": env_id, "method": method,
             "checkpoint": None if args.oracle else str(args.checkpoint),
             **{name: getattr(planner, name) for name in SWEPT_FIELDS},
             "state_weights": list(weights) if weights is not None else None,
             "num_tasks": len(seeds), "task_seed": args.task_seed,
+            "starts": starts if options else None,
             "mean": result.mean, "se": result.standard_error,
             "percentages": result.percentages.tolist(),
             "seconds": time.perf_counter() - start,

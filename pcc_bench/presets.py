@@ -55,6 +55,7 @@ TASK_STARTS: dict[str, str] = {
     "pcc/CartPole-v1": "pole angle U(-pi/6, pi/6), rest 0",
     "pcc/TwoLink-v0": "(pi, pi/2) at rest",
     "pcc/ThreeLink-v0": "(pi, 2pi/3, pi/3) at rest",
+    "pcc/ThreeLink-v1": "(pi, 2pi/3, pi/3) at rest",
     "pcc/LaneKeeping-v0": "20 forced full-left or full-right steps from the centre",
 }
 

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from pcc_envs.core import ImageControlEnv, wrap_angle
+from pcc_envs.core import ImageControlEnv, rk4_step, wrap_angle
 from pcc_envs.physics import ArmParams, arm_xdot, arm_xdot_list, rk4_list
 from pcc_envs.rendering import ArmView, render_arm
 
-__all__ = ["ManipulatorEnv", "start_angles"]
+__all__ = ["ARM_DOMAINS", "ArmDomain", "ManipulatorEnv", "start_angles"]
 
 GOAL_ANGLE = np.pi / 6
 """Success when the last link's absolute angle is within ``pi / 6`` of upright ..."""
@@ -18,6 +19,60 @@ SAMPLER_SPEED = 2.0 * np.pi
 """The data sampler draws joint velocities in ``[-2 pi, 2 pi]`` rad/s."""
 VALIDATION_ANGLE_SPREAD = np.pi / 8
 """Validation starts: every joint of :func:`start_angles` ``+ U(-pi/8, pi/8)`` rad, at rest."""
+
+
+@dataclass(frozen=True)
+class ArmDomain:
+    """The state space, limits, picture and goal of an arm domain (one row of :data:`ARM_DOMAINS`).
+
+    Attributes:
+        joint_limits: ``|q_i|`` bounds of the joints after the base (one per outer joint), or
+            ``None`` for joints that turn freely (angles wrapped). A bounded joint stops at its
+            bound: the angle is clipped and the rate into the stop set to zero.
+        sampler_speed: The data sampler draws every joint rate in ``[-sampler_speed,
+            sampler_speed]`` rad/s.
+        max_speed: Joint rates are clipped to ``[-max_speed, max_speed]`` rad/s after each step.
+        max_torque: Torque per joint for the action ``+1`` (N m), or ``None`` for
+            :meth:`pcc_envs.physics.ArmParams.default_max_torque`.
+        rod_width: Rod stroke width in pixels.
+        outside_goal_dt_scale: The control period outside the goal region is ``dt`` times this
+            (1: a fixed period).
+        goal: ``"tip"``: the last link within ``pi/6`` of upright with every joint and the tip
+            above the base; ``"every_link"``: every link's absolute angle within ``pi/6``.
+    """
+
+    joint_limits: tuple[float, ...] | None = None
+    sampler_speed: float = SAMPLER_SPEED
+    max_speed: float = 4.0 * np.pi
+    max_torque: tuple[float, ...] | None = None
+    rod_width: int = 3
+    outside_goal_dt_scale: float = 1.0
+    goal: str = "tip"
+
+    def __post_init__(self) -> None:
+        if self.goal not in ("tip", "every_link"):
+            raise ValueError(f"goal must be 'tip' or 'every_link', got {self.goal!r}")
+        if self.joint_limits is not None and not all(0 < b <= np.pi for b in self.joint_limits):
+            raise ValueError(f"joint_limits must lie in (0, pi], got {self.joint_limits!r}")
+        if not 0 < self.sampler_speed <= self.max_speed:
+            raise ValueError(
+                f"need 0 < sampler_speed <= max_speed, got {self.sampler_speed}, {self.max_speed}")
+        if self.outside_goal_dt_scale <= 0 or self.rod_width < 1:
+            raise ValueError("outside_goal_dt_scale must be positive and rod_width >= 1")
+
+
+#: The arm domains by name. ``"full"`` (v0): joints turn freely, fast rates, a fixed 0.02 s step.
+#: ``"pc3"`` (``pcc/ThreeLink-v1``): the 3-link domain of the PCC authors' code (their PC3
+#: repository, read as a reference): outer joints within ``2 pi/3`` and ``pi/3``, rates within
+#: ``pi/2`` rad/s, torque 1 N m on every joint, 5-pixel rods, a 0.05 s step outside the goal,
+#: and the goal every link within ``pi/6`` of upright. One difference, on purpose: at a bound
+#: their code wraps the joint to the opposite bound; ours stops there (a physical joint stop).
+ARM_DOMAINS: dict[str, ArmDomain] = {
+    "full": ArmDomain(),
+    "pc3": ArmDomain(joint_limits=(2.0 * np.pi / 3.0, np.pi / 3.0), sampler_speed=np.pi / 2,
+                     max_speed=np.pi / 2, max_torque=(1.0, 1.0, 1.0), rod_width=5,
+                     outside_goal_dt_scale=2.5, goal="every_link"),
+}
 
 
 def start_angles(num_links: int) -> np.ndarray:
@@ -30,7 +85,7 @@ def start_angles(num_links: int) -> np.ndarray:
 
 
 class ManipulatorEnv(ImageControlEnv):
-    r"""Swing an N-link arm up and balance it from pixels (TwoLink-v0, ThreeLink-v0).
+    r"""Swing an N-link arm up and balance it from pixels (TwoLink-v0, ThreeLink-v0 and -v1).
 
     ## Description
     ``num_links`` identical uniform rods (0.1 kg, 0.5 m, g = 9.81 m/s^2, no friction) are
@@ -81,7 +136,10 @@ class ManipulatorEnv(ImageControlEnv):
     ``num_links`` (2 or 3; any ``N >= 1`` works), ``max_torque`` (one value per joint, or
     ``None`` for the defaults), ``noise_std``, ``reward_type``, ``render_mode``,
     ``frame_gap`` (control periods between the two frames, default 1; see
-    :class:`pcc_envs.core.ImageControlEnv`).
+    :class:`pcc_envs.core.ImageControlEnv`), ``domain`` (a row of :data:`ARM_DOMAINS`:
+    ``"full"``, described above, or ``"pc3"``, the PCC authors' bounded, slow 3-link domain of
+    ``pcc/ThreeLink-v1``, which replaces the ranges, torques, rods, control period and goal
+    above by its own; see :class:`ArmDomain`).
 
     >>> import gymnasium as gym
     >>> import pcc_envs  # noqa: F401
@@ -107,14 +165,28 @@ class ManipulatorEnv(ImageControlEnv):
         reward_type: str = "dense",
         render_mode: str | None = None,
         frame_gap: int = 1,
+        domain: str = "full",
     ) -> None:
+        if domain not in ARM_DOMAINS:
+            raise ValueError(f"unknown arm domain {domain!r}; known: {sorted(ARM_DOMAINS)}")
+        self.domain = ARM_DOMAINS[domain]
+        limits = self.domain.joint_limits
+        if limits is not None and len(limits) != int(num_links) - 1:
+            raise ValueError(
+                f"arm domain {domain!r} bounds {len(limits)} outer joints, so it needs "
+                f"num_links={len(limits) + 1}, got {num_links}")
+        if max_torque is None:
+            max_torque = self.domain.max_torque
         torque = None if max_torque is None else tuple(np.atleast_1d(max_torque).tolist())
-        self.params = ArmParams(num_links=int(num_links), max_torque=torque)
-        self.view = ArmView()
+        self.params = ArmParams(num_links=int(num_links), max_torque=torque,
+                                max_speed=self.domain.max_speed)
+        self.view = ArmView(rod_width=self.domain.rod_width)
         self.num_links = self.params.num_links
         self.action_scale = self.params.max_torque  # type: ignore[assignment]
         n = self.num_links
-        self.state_low = np.concatenate([np.full(n, -np.pi), np.full(n, -SAMPLER_SPEED)])
+        angle_bounds = np.full(n, np.pi) if limits is None else np.array([np.pi, *limits])
+        self._joint_bounds = None if limits is None else np.asarray(limits, dtype=np.float64)
+        self.state_low = np.concatenate([-angle_bounds, np.full(n, -self.domain.sampler_speed)])
         self.state_high = -self.state_low
         self.goal_state = np.zeros(2 * n)
         self.reward_weights = np.concatenate([np.ones(n), np.full(n, 0.1)])
@@ -124,21 +196,52 @@ class ManipulatorEnv(ImageControlEnv):
     def _xdot(self, state: np.ndarray, action: np.ndarray) -> np.ndarray:
         return arm_xdot(state, action, self.params)
 
-    def _dynamics(self, state: np.ndarray, action: np.ndarray) -> np.ndarray:
-        if state.ndim > 1 or action.ndim > 1:
-            return super()._dynamics(state, action)
-        # One state (the env's step): the same RK4 in plain Python floats, 10x faster.
-        tau = action.tolist()
-        values = state.tolist()
-        h = self.dt / self.substeps
+    def _control_period(self, state: np.ndarray) -> np.ndarray | float:
+        """``dt``, or ``dt * outside_goal_dt_scale`` outside the goal (batched: ``(N, 1)``)."""
+        scale = self.domain.outside_goal_dt_scale
+        if scale == 1.0:
+            return self.dt
+        inside = self._goal_mask(np.asarray(state, dtype=np.float64))
+        return np.where(inside, self.dt, self.dt * scale)[..., None]
+
+    def _integrate(self, state: np.ndarray, action: np.ndarray, direction: float,
+                   scalar_path: bool = True) -> np.ndarray:
+        """RK4 over one control period, forward (``direction`` 1) or backward (-1)."""
+        period = self._control_period(state)
+        if scalar_path and state.ndim == 1 and action.ndim == 1:
+            # One state (the env's step): the same RK4 in plain Python floats, 10x faster.
+            tau = action.tolist()
+            values = state.tolist()
+            h = direction * float(np.squeeze(period)) / self.substeps
+            for _ in range(self.substeps):
+                values = rk4_list(lambda v: arm_xdot_list(v, tau, self.params), values, h)
+            return self._postprocess(np.array(values))
+        h = direction * np.asarray(period) / self.substeps
         for _ in range(self.substeps):
-            values = rk4_list(lambda v: arm_xdot_list(v, tau, self.params), values, h)
-        return self._postprocess(np.array(values))
+            state = rk4_step(self._xdot, state, action, h)
+        return self._postprocess(state)
+
+    def _dynamics(self, state: np.ndarray, action: np.ndarray) -> np.ndarray:
+        return self._integrate(np.asarray(state, dtype=np.float64),
+                               np.asarray(action, dtype=np.float64), 1.0)
+
+    def _previous_state(self, state: np.ndarray) -> np.ndarray:
+        state = np.asarray(state, dtype=np.float64)
+        zero = np.zeros(state.shape[:-1] + (self.num_links,))
+        return self._integrate(state, zero, -1.0, scalar_path=False)
 
     def _postprocess(self, state: np.ndarray) -> np.ndarray:
         n = self.num_links
         out = np.array(state, dtype=np.float64)
-        out[..., :n] = wrap_angle(out[..., :n])
+        if self._joint_bounds is None:
+            out[..., :n] = wrap_angle(out[..., :n])
+        else:
+            out[..., 0] = wrap_angle(out[..., 0])
+            bound = self._joint_bounds
+            angles, rates = out[..., 1:n], out[..., n + 1:]
+            # A joint stop: the angle stays at its bound, the rate into the stop is lost.
+            rates[((angles >= bound) & (rates > 0)) | ((angles <= -bound) & (rates < 0))] = 0.0
+            out[..., 1:n] = np.clip(angles, -bound, bound)
         out[..., n:] = np.clip(out[..., n:], -self.params.max_speed, self.params.max_speed)
         return out
 
@@ -148,7 +251,7 @@ class ManipulatorEnv(ImageControlEnv):
     def _sample_validation_start_state(self, rng: np.random.Generator) -> np.ndarray:
         angles = start_angles(self.num_links) + rng.uniform(
             -VALIDATION_ANGLE_SPREAD, VALIDATION_ANGLE_SPREAD, self.num_links)
-        return np.concatenate([wrap_angle(angles), np.zeros(self.num_links)])
+        return self._postprocess(np.concatenate([angles, np.zeros(self.num_links)]))
 
     def state_error(self, state: np.ndarray, goal: np.ndarray | None = None) -> np.ndarray:
         """``state - goal`` with the joint angles wrapped to ``[-pi, pi)`` (batched)."""
@@ -157,8 +260,15 @@ class ManipulatorEnv(ImageControlEnv):
         return err
 
     def in_goal(self, state: np.ndarray) -> bool:
-        """Last link within ``pi/6`` of upright and every joint and the tip above the base."""
+        """Whether ``state`` is in the domain's goal region (see :class:`ArmDomain`.goal)."""
         q = np.asarray(state, dtype=np.float64)[: self.num_links].tolist()
+        if self.domain.goal == "every_link":
+            phi = 0.0
+            for angle in q:
+                phi += angle
+                if abs(float(wrap_angle(phi))) >= GOAL_ANGLE:
+                    return False
+            return True
         height, phi = 0.0, 0.0
         for angle in q:
             phi += angle
@@ -166,6 +276,14 @@ class ManipulatorEnv(ImageControlEnv):
             if height <= 0.0:
                 return False
         return abs(float(wrap_angle(phi))) <= GOAL_ANGLE
+
+    def _goal_mask(self, states: np.ndarray) -> np.ndarray:
+        """Batched :meth:`in_goal` (a bool array of the batch shape)."""
+        phi = np.cumsum(states[..., : self.num_links], axis=-1)
+        if self.domain.goal == "every_link":
+            return np.all(np.abs(wrap_angle(phi)) < GOAL_ANGLE, axis=-1)
+        heights = np.cumsum(np.cos(phi), axis=-1)
+        return np.all(heights > 0.0, axis=-1) & (np.abs(wrap_angle(phi[..., -1])) <= GOAL_ANGLE)
 
     def render_states(self, states: np.ndarray) -> np.ndarray:
         """Render ``(N, 2 num_links)`` states to ``uint8 (N, 80, 80)`` frames."""

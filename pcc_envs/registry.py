@@ -28,6 +28,8 @@ ENV_TABLE: tuple[EnvRow, ...] = (
     EnvRow("pcc/CartPole-v1", "pcc_envs.cartpole:CartPoleEnv", 200, {"picture": "schematic"}),
     EnvRow("pcc/TwoLink-v0", "pcc_envs.manipulator:ManipulatorEnv", 400, {"num_links": 2}),
     EnvRow("pcc/ThreeLink-v0", "pcc_envs.manipulator:ManipulatorEnv", 400, {"num_links": 3}),
+    EnvRow("pcc/ThreeLink-v1", "pcc_envs.manipulator:ManipulatorEnv", 400,
+           {"num_links": 3, "domain": "pc3"}),
     EnvRow("pcc/LaneKeeping-v0", "pcc_envs.lane_keeping:LaneKeepingEnv", 200),
 )
 

@@ -47,6 +47,27 @@ def test_oracle_sweep_leaves_out_invalid_settings_and_records_state_weights(tmp_
     assert all(r["method"] == "oracle" and r["replan_every"] == 1 for r in rows)
 
 
+def test_sweep_starts_from_validation_starts_except_on_evaluation_tasks(tmp_path, monkeypatch):
+    """A fixed-start domain's tasks of another seed would replay the evaluation task."""
+    import pcc_agent.evaluation as evaluation
+
+    calls = []
+    real = evaluation.evaluate_control
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs.get("reset_options"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(evaluation, "evaluate_control", spy)
+    argv = ["--oracle", "pcc/PendulumBalance-v0", "--plan-lengths", "3", "--num-candidates", "2",
+            "--num-tasks", "1", "--out", str(tmp_path / "o.json")]
+    assert planner_sweep.main(argv) == 0
+    assert json.loads((tmp_path / "o.json").read_text())["rows"][0]["starts"] == "validation"
+    assert planner_sweep.main([*argv, "--task-seed", "2020", "--allow-evaluation-tasks"]) == 0
+    assert json.loads((tmp_path / "o.json").read_text())["rows"][0]["starts"] == "task"
+    assert calls == [{"start": "validation"}, {"start": "task"}]
+
+
 def test_sweep_refuses_the_evaluation_tasks_unless_asked(capsys):
     with pytest.raises(SystemExit):
         planner_sweep.main(["--oracle", "pcc/Planar-v0", "--task-seed", "2020"])

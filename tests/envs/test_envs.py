@@ -173,7 +173,8 @@ def test_frame_gap_needs_stacked_frames():
         ImageControlEnv(frame_gap=2)  # the base class observes one frame
 
 
-FIXED_START = ("pcc/PendulumSwingUp-v0", "pcc/TwoLink-v0", "pcc/ThreeLink-v0")
+FIXED_START = ("pcc/PendulumSwingUp-v0", "pcc/TwoLink-v0", "pcc/ThreeLink-v0",
+               "pcc/ThreeLink-v1")
 
 
 @pytest.mark.parametrize("env_id", ORACLE)
@@ -282,6 +283,7 @@ def test_cartpole_sampler_angle_sets_the_data_range():
 def test_arm_start_is_not_a_success():
     for env_id, angles in [
         ("pcc/ThreeLink-v0", [np.pi, 2 * np.pi / 3, np.pi / 3]),
+        ("pcc/ThreeLink-v1", [np.pi, 2 * np.pi / 3, np.pi / 3]),
         ("pcc/TwoLink-v0", [np.pi, np.pi / 2]),
     ]:
         env = _make(env_id)
@@ -289,6 +291,40 @@ def test_arm_start_is_not_a_success():
         n = len(angles)
         np.testing.assert_allclose(np.cos(info["state"][:n]), np.cos(angles), atol=1e-12)
         assert not info["in_goal"]
+
+
+def test_three_link_v1_is_the_authors_bounded_slow_domain():
+    """pcc/ThreeLink-v1 (domain "pc3"): bounded outer joints, slow rates, torque 1 per joint."""
+    env = _make("pcc/ThreeLink-v1").unwrapped
+    np.testing.assert_allclose(env.state_high, [np.pi, 2 * np.pi / 3, np.pi / 3, *[np.pi / 2] * 3])
+    assert env.params.max_torque == (1.0, 1.0, 1.0) and env.view.rod_width == 5
+    samples = env.sample_states(np.random.default_rng(0), 2000)
+    assert np.all(np.abs(samples) <= env.state_high) and np.all(
+        np.abs(samples).max(axis=0) > 0.95 * env.state_high)
+    # The outer joint pushed into its stop stays there and loses its rate into the stop.
+    at_stop = np.array([0.0, 0.0, np.pi / 3, 0.0, 0.0, 1.0])
+    after = env.transition(at_stop, np.array([0.0, 0.0, 1.0]))
+    assert after[2] == np.pi / 3 and after[5] == 0.0
+    fast = env.transition(np.array([np.pi / 2, 0.0, 0.0, 0.0, 0.0, 0.0]), np.ones(3))
+    assert np.all(np.abs(fast[3:]) <= np.pi / 2)
+
+
+def test_three_link_v1_steps_longer_outside_every_link_goal():
+    v0, v1 = _make("pcc/ThreeLink-v0").unwrapped, _make("pcc/ThreeLink-v1").unwrapped
+    tip_up_link_tilted = np.array([0.0, 0.6, -0.6, 0.0, 0.0, 0.0])
+    assert v0.in_goal(tip_up_link_tilted) and not v1.in_goal(tip_up_link_tilted)
+    assert v1.in_goal(np.array([0.1, 0.2, -0.3, 1.0, 1.0, 1.0]))
+    states = np.array([np.zeros(6), tip_up_link_tilted])
+    np.testing.assert_allclose(v1._control_period(states)[:, 0], [0.02, 0.05])
+    np.testing.assert_array_equal(v1._goal_mask(states), [v1.in_goal(s) for s in states])
+    assert v0._control_period(states) == 0.02
+
+
+def test_bad_arm_domain_raises():
+    with pytest.raises(ValueError, match="unknown arm domain 'pc4'"):
+        _make("pcc/ThreeLink-v0", domain="pc4")
+    with pytest.raises(ValueError, match="needs num_links=3"):
+        _make("pcc/TwoLink-v0", domain="pc3")
 
 
 def test_render_rgb_array():
