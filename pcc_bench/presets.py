@@ -259,7 +259,8 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
     # code never held CartPole's rates; judged on state R^2 and validation tasks.
     "paper-motion": _PAPER.replace(
         name="paper-motion", model_variant="motion",
-        envs=("pcc/CartPole-v1", "pcc/TwoLink-v0", "pcc/ThreeLink-v0", "pcc/LaneKeeping-v0")),
+        envs=("pcc/CartPole-v1", "pcc/TwoLink-v0", "pcc/ThreeLink-v0", "pcc/ThreeLink-v1",
+              "pcc/LaneKeeping-v0")),
     # The same protocol with the CPU-friendly CNNs for CartPole, the arms and LaneKeeping.
     "paper-fast": _PAPER_FAST,
     # "paper-fast" with a longer early-stopping criterion: 100 epochs without improvement, at
@@ -347,7 +348,10 @@ PAPER_RESULTS: _T = {
     ("pcc/ThreeLink-v0", "pcc", 1.0): {"all": (0.5, 0.1), "top1": (1.8, 0.3)},
 }
 # The paper's cart-pole is both of ours: pcc/CartPole-v1 draws its authors' picture, v0 one to
-# scale (pcc_envs.cartpole).
-PAPER_RESULTS.update({("pcc/CartPole-v1", method, noise): row
-                      for (env, method, noise), row in list(PAPER_RESULTS.items())
-                      if env == "pcc/CartPole-v0"})
+# scale (pcc_envs.cartpole). Its 3-link arm too: pcc/ThreeLink-v1 is its authors' bounded,
+# slow domain, v0 a full-circle one (pcc_envs.manipulator.ARM_DOMAINS).
+for _ours, _papers in (("pcc/CartPole-v1", "pcc/CartPole-v0"),
+                       ("pcc/ThreeLink-v1", "pcc/ThreeLink-v0")):
+    PAPER_RESULTS.update({(_ours, method, noise): row
+                          for (env, method, noise), row in list(PAPER_RESULTS.items())
+                          if env == _papers})
