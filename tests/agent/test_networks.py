@@ -56,7 +56,7 @@ def test_paper_planar_architecture_sizes():
     assert {e: get_preset(e).model.latent_dim for e in PRESETS} == {
         "pcc/Planar-v0": 2, "pcc/PendulumSwingUp-v0": 3, "pcc/PendulumBalance-v0": 3,
         "pcc/CartPole-v0": 8, "pcc/CartPole-v1": 8, "pcc/TwoLink-v0": 8, "pcc/ThreeLink-v0": 8,
-        "pcc/LaneKeeping-v0": 8}
+        "pcc/ThreeLink-v1": 8, "pcc/LaneKeeping-v0": 8}
 
 
 def test_uint8_observations_are_scaled_inside_the_model():
