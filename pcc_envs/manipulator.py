@@ -201,6 +201,8 @@ class ManipulatorEnv(ImageControlEnv):
         scale = self.domain.outside_goal_dt_scale
         if scale == 1.0:
             return self.dt
+        if state.ndim == 1:  # the env's step: the plain-Python goal test
+            return self.dt if self.in_goal(state) else self.dt * scale
         inside = self._goal_mask(np.asarray(state, dtype=np.float64))
         return np.where(inside, self.dt, self.dt * scale)[..., None]
 
@@ -212,7 +214,7 @@ class ManipulatorEnv(ImageControlEnv):
             # One state (the env's step): the same RK4 in plain Python floats, 10x faster.
             tau = action.tolist()
             values = state.tolist()
-            h = direction * float(np.squeeze(period)) / self.substeps
+            h = direction * float(period) / self.substeps
             for _ in range(self.substeps):
                 values = rk4_list(lambda v: arm_xdot_list(v, tau, self.params), values, h)
             return self._postprocess(np.array(values))
