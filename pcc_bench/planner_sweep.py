@@ -6,9 +6,11 @@ Two modes:
   plans with each setting. This is how the per-domain planner settings of
   ``pcc_agent.presets`` are chosen: it measures what the planner itself allows, before any
   learning, so the settings are not fitted to one learned model.
-* ``CHECKPOINT``: a saved agent (``PCCAgent.save``; the reproduction pipeline keeps one per
-  run under ``<results>/checkpoints/``) re-runs its control tasks with each setting; training
-  is not repeated.
+* ``CHECKPOINT ...``: saved agents (``PCCAgent.save``, or the float16 weights the reproduction
+  pipeline keeps under ``<results>/weights/``) re-run their control tasks with each setting;
+  training is not repeated. With several agents of one env (e.g. a grid row's models), each
+  setting is also summarized by its mean over the agents (``summary``), so a setting is
+  chosen for the row, not for one model.
 
 Settings are never chosen on the evaluation tasks: the tasks are drawn from
 ``--task-seed`` (default 2021, a validation split) and start from the env's validation starts
@@ -21,6 +23,8 @@ Examples:
     python -m pcc_bench.planner_sweep --oracle pcc/CartPole-v0 --plan-lengths 10 50
         --replan-every 1 5 --kappas 10 1000 --out results/planner_sweep/cp.json
     python -m pcc_bench.planner_sweep CHECKPOINT --plan-lengths 10 20 40 --kappas 1 10
+    python -m pcc_bench.planner_sweep results/reproduce/weights/runs/LABEL/ENV/noise0.0/pcc/*
+        --task-seed 2022 --plan-lengths 30 50 --out sweep.json
 """
 
 from __future__ import annotations
@@ -64,9 +68,9 @@ def _weights(text: str) -> tuple[float, ...]:
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m pcc_bench.planner_sweep``."""
     parser = command_parser(__doc__, "pcc_bench.planner_sweep")
-    target = parser.add_mutually_exclusive_group(required=True)
-    target.add_argument("checkpoint", type=Path, nargs="?", help="A PCCAgent file.")
-    target.add_argument("--oracle", metavar="ENV_ID", help="Sweep the true-dynamics oracle.")
+    parser.add_argument("checkpoints", type=Path, nargs="*", metavar="CHECKPOINT",
+                        help="PCCAgent files (.pt or float16 .safetensors) of one env.")
+    parser.add_argument("--oracle", metavar="ENV_ID", help="Sweep the true-dynamics oracle.")
     for name, (option, kind) in SWEPT_FIELDS.items():
         parser.add_argument(option, dest=name, type=kind, nargs="+", default=None,
                             help=f"Values of PlannerConfig.{name} (default: the preset's).")
@@ -110,6 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--task-seed {evaluation_seed} draws the evaluation tasks; planner "
                      "settings are chosen on other tasks (default "
                      f"{VALIDATION_TASK_SEED}). Add --allow-evaluation-tasks to report on them.")
+    if bool(args.checkpoints) == bool(args.oracle):
+        parser.error("give either saved agents (CHECKPOINT ...) or --oracle ENV_ID")
     if args.state_weights and not args.oracle:
         parser.error("--state-weights applies to --oracle sweeps only")
 
@@ -133,53 +139,84 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         from pcc_agent import PCCAgent
 
-        agent = PCCAgent.load(args.checkpoint)
-        env_id, method, env_kwargs = agent.env_id, agent.method, agent.env_kwargs
-        base_planner = agent.planner
+        agents = {str(path): PCCAgent.load(path) for path in args.checkpoints}
+        first = next(iter(agents.values()))
+        env_id, method, env_kwargs = first.env_id, first.method, first.env_kwargs
+        others = sorted({a.env_id for a in agents.values()} - {env_id})
+        if others:
+            parser.error(f"the saved agents control different envs ({env_id}, "
+                         f"{', '.join(others)}); sweep one env at a time")
+        base_planner = first.planner
         weight_grid = [None]
     options = {"start": starts} if env_id.startswith("pcc/") else None
     try:
         configs = settings_grid(base_planner, args)
     except ValueError as error:  # PlannerConfig refuses an inconsistent combination
         parser.error(str(error))
-    rows = []
+    rows: list[dict[str, Any]] = []
+    summary: list[dict[str, Any]] = []
+    targets = [None] if args.oracle else list(agents)
+    total = len(configs) * len(weight_grid) * len(targets)
     for planner, weights in itertools.product(configs, weight_grid):
-        start = time.perf_counter()
-        if args.oracle:
-            oracle = dataclasses.replace(oracle_base, state_weights=weights)
-            result = evaluate_control(
-                lambda env, o=oracle, p=planner: OracleController(env, o, p),
-                env_id, seeds, env_kwargs, record_states=False, reset_options=options)
-        else:
-            agent.set_planner(planner)  # also restarts the planner's draws from the seed
-            result = evaluate_control(agent, env_id, seeds, env_kwargs, record_states=False,
-                                      reset_options=options)
-        row = {
-            "env": env_id, "method": method,
-            "checkpoint": None if args.oracle else str(args.checkpoint),
-            **{name: getattr(planner, name) for name in SWEPT_FIELDS},
-            "state_weights": list(weights) if weights is not None else None,
-            "num_tasks": len(seeds), "task_seed": args.task_seed,
-            "starts": starts if options else None,
-            "mean": result.mean, "se": result.standard_error,
-            "percentages": result.percentages.tolist(),
-            "seconds": time.perf_counter() - start,
-        }
-        rows.append(row)
         varied = ", ".join(f"{name} {getattr(planner, name):g}" for name in SWEPT_FIELDS
                            if getattr(args, name))
         if weights is not None and args.state_weights:
             varied += f", state weights {weights}"
-        print(f"{varied or 'preset settings'}: {format_mean_se(row['mean'], row['se'])} % in "
-              f"goal ({row['seconds']:.0f} s)", flush=True)
-        if args.out is not None:  # after every row: a cut-short sweep keeps what it measured
-            done = len(rows) == len(configs) * len(weight_grid)
-            atomic_write_json(args.out, {
-                "command": " ".join(["python -m pcc_bench.planner_sweep", *argv]),
-                "status": "done" if done else "partial", "rows": rows})
+        setting_rows = []
+        for checkpoint in targets:
+            start = time.perf_counter()
+            if args.oracle:
+                oracle = dataclasses.replace(oracle_base, state_weights=weights)
+                result = evaluate_control(
+                    lambda env, o=oracle, p=planner: OracleController(env, o, p),
+                    env_id, seeds, env_kwargs, record_states=False, reset_options=options)
+            else:
+                agent = agents[checkpoint]
+                agent.set_planner(planner)  # also restarts the planner's draws from the seed
+                result = evaluate_control(agent, env_id, seeds, env_kwargs,
+                                          record_states=False, reset_options=options)
+            row = {
+                "env": env_id, "method": method, "checkpoint": checkpoint,
+                **{name: getattr(planner, name) for name in SWEPT_FIELDS},
+                "state_weights": list(weights) if weights is not None else None,
+                "num_tasks": len(seeds), "task_seed": args.task_seed,
+                "starts": starts if options else None,
+                "mean": result.mean, "se": result.standard_error,
+                "percentages": result.percentages.tolist(),
+                "seconds": time.perf_counter() - start,
+            }
+            rows.append(row)
+            setting_rows.append(row)
+            where = "" if checkpoint is None else f" [{Path(checkpoint).stem}]"
+            print(f"{varied or 'preset settings'}{where}: "
+                  f"{format_mean_se(row['mean'], row['se'])} % in goal "
+                  f"({row['seconds']:.0f} s)", flush=True)
+            if args.out is not None:  # after every row: a cut-short sweep keeps what it measured
+                _write(args.out, argv, rows, summary,
+                       done=len(rows) == total and len(targets) == 1)
+        if len(targets) > 1:
+            means = [r["mean"] for r in setting_rows]
+            summary.append({
+                **{name: getattr(planner, name) for name in SWEPT_FIELDS},
+                "num_agents": len(means), "mean_over_agents": float(sum(means) / len(means)),
+                "agent_means": means})
+            print(f"{varied or 'preset settings'}: {summary[-1]['mean_over_agents']:.1f} % in "
+                  f"goal over {len(means)} agents", flush=True)
+            if args.out is not None:
+                _write(args.out, argv, rows, summary, done=len(rows) == total)
     if args.out is not None:
         print(f"Wrote {args.out}")
     return 0
+
+
+def _write(out: Path, argv: list[str], rows: list[dict[str, Any]],
+           summary: list[dict[str, Any]], done: bool) -> None:
+    payload: dict[str, Any] = {
+        "command": " ".join(["python -m pcc_bench.planner_sweep", *argv]),
+        "status": "done" if done else "partial", "rows": rows}
+    if summary:
+        payload["summary"] = summary
+    atomic_write_json(out, payload)
 
 
 if __name__ == "__main__":
