@@ -179,10 +179,12 @@ _ARM_MODEL = _paper_cnn_model(8, 62, 500, (500, 2560), 400)
 _LANE_MODEL = _paper_cnn_model(8, 32, 200, (200,), 300)
 
 # Planner settings per domain (planner revision 3), each with its reason. They were chosen
-# with the true-dynamics oracle, which runs exactly these settings (pcc_agent.oracle), on
-# validation tasks (task seed 2021; the evaluation tasks use 2020), never on a learned
-# model's evaluation results: benchmarks/results/planner_sweep/oracle_<env>.json has every
-# setting tried and its command. Starting point: the PC3 reference protocol (horizon /
+# with the true-dynamics oracle (pcc_agent.oracle) on validation tasks (task seed 2021; the
+# evaluation tasks use 2020), never on a learned model's evaluation results:
+# results/planner_sweep/oracle_<env>.json has every setting tried and its command. Where a
+# full row of learned models then did better with a shorter horizon on tasks of other seeds
+# (2022, 2023; results/planner_sweep/learned/), the row says so and takes it, and the oracle
+# keeps its own horizon (OracleConfig.plan_length). Starting point: the PC3 reference protocol (horizon /
 # replan: planar 40 / 10, pendulum 100 / 10, cartpole 50 / 5, 3-link 200 / 20; q / r:
 # planar 10, pendulum and 3-link 50, cartpole 1000; 3 uniform + 3 extreme initial plans).
 # Rules: the shortest horizon within 0.5 points of the best oracle score; replanning at
@@ -222,6 +224,14 @@ _CARTPOLE_ROW = DomainPresets(
     # every step).
     planner=PlannerConfig(plan_length=50, kappa=10.0, **_PC3_CANDIDATES),
 )
+# CartPole-v1 (the authors' picture): checked on its 10 learned models of the 60-epoch row, on
+# tasks of seeds 2022 and 2023 (never the evaluation seed 2020): T = 20 beats T = 50 on both
+# (54.6 vs 47.5%, 71.5 vs 58.4%; T = 15, 30, 40, 80, kappa 100 and 5 MPC iterations no
+# better), planner_sweep/learned/CartPole-v1_*.json. A long plan follows a learned model's
+# drift far from the data. The oracle keeps T = 50 (pcc_agent.oracle). v0 keeps the row
+# above, where its committed records were made.
+_CARTPOLE_V1_ROW = dataclasses.replace(
+    _CARTPOLE_ROW, planner=PlannerConfig(plan_length=20, kappa=10.0, **_PC3_CANDIDATES))
 
 #: The presets table: one row per registered environment (data sizes: paper Appendix "Data
 #: Collection Process"; observation shapes: docs/architecture.md, Conventions).
@@ -256,9 +266,9 @@ DOMAINS: dict[str, DomainPresets] = {
         # slanted starts).
         planner=PlannerConfig(plan_length=10, kappa=10.0, **_PC3_CANDIDATES),
     ),
-    # Both cart-pole pictures (physical and schematic, pcc_envs.cartpole) share one row.
+    # Both cart-pole pictures (physical and schematic, pcc_envs.cartpole) share a recipe.
     "pcc/CartPole-v0": _CARTPOLE_ROW,
-    "pcc/CartPole-v1": _CARTPOLE_ROW,
+    "pcc/CartPole-v1": _CARTPOLE_V1_ROW,
     "pcc/TwoLink-v0": DomainPresets(
         obs_shape=(2, 80, 80), action_dim=2, num_samples=30000,
         model=_ARM_MODEL, fast_model=_fast_cnn_model(8, 256, 200),
@@ -276,8 +286,11 @@ DOMAINS: dict[str, DomainPresets] = {
         model=_LANE_MODEL, fast_model=_fast_cnn_model(8, 200, 200),
         motion_model=_motion_cnn_model(8, 200, 200),
         train=_PAPER_TRAINING, fast_train=_PAPER_TRAINING,
-        # Oracle 72.7% at T = 20 against 71.9% at 10 (Bullet oracle, 5-10 min per setting).
-        planner=PlannerConfig(plan_length=20, kappa=10.0, **_PC3_CANDIDATES),
+        # Oracle 72.7% at T = 20 against 71.9% at 10 (Bullet oracle, 5-10 min per setting);
+        # the oracle keeps 20. The 10 learned models of the 30-epoch row do better at 10, on
+        # tasks of seeds 2022 and 2023: 60.6 vs 55.9% and 66.9 vs 62.8% (T = 40: 45.7%),
+        # planner_sweep/learned/LaneKeeping-v0_*.json.
+        planner=PlannerConfig(plan_length=10, kappa=10.0, **_PC3_CANDIDATES),
     ),
 }
 

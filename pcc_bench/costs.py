@@ -58,6 +58,8 @@ BASIS_TEXT = {
     "reference guess": "a guess (no finished run of that reference controller)",
     "checkpoint": "their training checkpoint's seconds per epoch, for the epochs left to the "
                   "cap",
+    "re-evaluation": "their control seconds (trained models whose control tasks run again "
+                     "with new planner settings)",
 }
 
 
@@ -282,6 +284,7 @@ def estimate_cost(
     runs: Sequence[RunSpec], finished: Iterable[dict[str, Any]] = (),
     machine: dict[str, Any] | None = None,
     resumed: dict[RunSpec, CheckpointedTraining] | None = None,
+    reevaluated: dict[RunSpec, float] | None = None,
 ) -> CostEstimate:
     """Expected and upper durations of ``runs`` (one core each), see the module docstring.
 
@@ -292,8 +295,11 @@ def estimate_cost(
         machine: This machine (:func:`pcc_bench.records.machine_info`); records measured on
             it are preferred. None: no preference.
         resumed: The runs that resume a training checkpoint (:func:`checkpointed_trainings`).
+        reevaluated: The runs that only run their control tasks again, and the seconds their
+            records' control took (:func:`reevaluations`).
     """
     resumed = resumed or {}
+    reevaluated = reevaluated or {}
     measured = _train_speeds()
     timed = _timed(finished, machine)
     by_kind: dict[tuple[Any, ...], list[_Timed]] = {}
@@ -353,6 +359,9 @@ def estimate_cost(
                 run_expected = run_upper = left * checkpoint.seconds_per_epoch
             else:
                 run_expected, run_upper = run_expected * left / cap, run_upper * left / cap
+        if spec in reevaluated:  # no training: the control tasks again
+            used, basis = [], "re-evaluation"
+            run_expected = run_upper = reevaluated[spec]
         expected.append(run_expected)
         upper.append(max(run_upper, run_expected))
         bases.append(f"{basis}, {where}" if used and machine is not None else basis)
@@ -370,6 +379,23 @@ class CheckpointedTraining:
 
     epochs: int
     seconds_per_epoch: float | None
+
+
+def reevaluations(results_dir: Path, runs: Iterable[RunSpec]) -> dict[RunSpec, float]:
+    """The runs of ``runs`` that only run their control tasks again, and those tasks' seconds.
+
+    See :func:`pcc_bench.weights.record_to_reevaluate`; the seconds are the record's own
+    control time (``eval_seconds``), scaled to the run's number of tasks.
+    """
+    from pcc_bench.weights import record_to_reevaluate
+
+    found = {}
+    for spec in runs:
+        record = record_to_reevaluate(results_dir, spec)
+        if record is not None:
+            tasks = max(len(record.get("percentages") or ()), 1)
+            found[spec] = float(record.get("eval_seconds", 0.0)) * spec.num_tasks / tasks
+    return found
 
 
 def checkpointed_trainings(results_dir: Path, runs: Iterable[RunSpec]
@@ -475,10 +501,14 @@ def status_lines(
         return [head + "."]
     finished = load_timing_records(timing_directories(results_dir))
     resumed = checkpointed_trainings(results_dir, pending)
-    cost = estimate_cost(pending, finished, machine_info(), resumed)
+    reevaluated = reevaluations(results_dir, pending)
+    cost = estimate_cost(pending, finished, machine_info(), resumed, reevaluated)
     if resumed:
         head += (f" ({len(resumed)} resume{'s' if len(resumed) == 1 else ''} a training "
                  f"checkpoint, {sum(c.epochs for c in resumed.values())} epochs done)")
+    if reevaluated:
+        head += (f" ({len(reevaluated)} only re-evaluate{'s' if len(reevaluated) == 1 else ''}"
+                 " a trained model with new planner settings)")
     if backend == "ray":
         return [
             f"{head}: about {cost.expected_seconds / 3600:,.1f} core-hours, at most "

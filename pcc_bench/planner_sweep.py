@@ -130,11 +130,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     # the evaluation task.
     starts = "task" if args.task_seed == evaluation_seed else "validation"
     if args.oracle:
-        from pcc_agent.oracle import OracleController, agent_planner_for, oracle_config_for
+        from pcc_agent.oracle import OracleController, oracle_config_for, oracle_planner_for
 
         env_id, method, env_kwargs = args.oracle, "oracle", None
-        base_planner = agent_planner_for(env_id)
         oracle_base = oracle_config_for(env_id)
+        base_planner = oracle_planner_for(env_id, oracle_base)
         weight_grid = args.state_weights or [oracle_base.state_weights]
     else:
         from pcc_agent import PCCAgent

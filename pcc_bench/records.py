@@ -21,7 +21,8 @@ from pcc_bench.paths import DEFAULT_RESULTS_ROOT
 DEFAULT_RESULTS_DIR = DEFAULT_RESULTS_ROOT / "reproduce"
 #: The format number of a run record.
 RESULT_FORMAT = 1
-#: The true-dynamics controller with the agents' planner settings: the ceiling.
+#: The true-dynamics controller with the agents' planner settings (the horizon may be the
+#: oracle's own, pcc_agent.oracle.OracleConfig.plan_length): the ceiling.
 ORACLE = "oracle"
 #: The controller that applies zero actions: the floor beside the oracle's ceiling. Where a
 #: start lies near the goal (CartPole) doing nothing already scores, and a learned controller
@@ -174,7 +175,7 @@ def remove_training_checkpoint(path: Path) -> None:
 
 
 def training_progress(results_dir: str | Path, spec: RunSpec) -> str:
-    """One line on where a run stands: done, training or not started.
+    """One line on where a run stands: done, to re-evaluate, training or not started.
 
     For a training in progress: its epoch, epoch cap and best validation loss so far. Reads
     the run's record and its training checkpoint; changes nothing.
@@ -182,10 +183,15 @@ def training_progress(results_dir: str | Path, spec: RunSpec) -> str:
     from pcc_agent.checkpoint import CheckpointError, load_checkpoint
     from pcc_agent.presets import get_preset
 
+    from pcc_bench.weights import record_to_reevaluate
+
     label = f"{spec.env_id} {spec.method} noise={spec.noise_std} seed={spec.seed}"
     record = load_finished_run(Path(results_dir) / spec.relative_path, spec)
     if record is not None:
         return f"{label}: done, {record['mean']:.1f}% of steps in goal"
+    if record_to_reevaluate(Path(results_dir), spec) is not None:
+        return (f"{label}: trained, its control tasks to run again from the saved weights "
+                "(evaluated with other planner settings)")
     path = training_checkpoint_path(results_dir, spec)
     if not path.exists():
         return f"{label}: not started"
@@ -279,8 +285,10 @@ def same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
     """Whether a record was evaluated by this planner revision with the preset's settings.
 
     Records without a revision were evaluated by revision 1. Oracle records are compared
-    with the env's current ``ORACLE_CONFIGS`` entry and the preset's planner (the oracle runs
-    the agents' settings); no-action records plan nothing and always match.
+    with the env's current ``ORACLE_CONFIGS`` entry and the oracle's planner (the agents'
+    settings, with the oracle's own horizon where it has one); the horizon is judged by the
+    planner the record ran, so records written before ``OracleConfig`` had ``plan_length``
+    stay valid where they ran that horizon. No-action records plan nothing and always match.
     """
     from pcc_agent.planning import PLANNER_REVISION
 
@@ -289,14 +297,26 @@ def same_planner(record: dict[str, Any], spec: RunSpec) -> bool:
     config = record.get("config", {})
     if config.get("planner_revision", 1) != PLANNER_REVISION:
         return False
+    planner = preset_for(spec).planner
     if spec.method == ORACLE:
-        from pcc_agent.oracle import oracle_config_for
+        from pcc_agent.oracle import OracleConfig, oracle_config_for, oracle_planner_for
 
-        wanted = json.loads(json.dumps(asdict(oracle_config_for(spec.env_id))))
-        if config.get("oracle") != wanted:
+        wanted_oracle = oracle_config_for(spec.env_id)
+        try:
+            recorded = OracleConfig(**config.get("oracle", {}))
+        except (TypeError, ValueError):
             return False
-    wanted = json.loads(json.dumps(asdict(preset_for(spec).planner)))
-    return config.get("planner") == wanted
+        # The horizon is compared below, in the planner the oracle ran.
+        if (_as_json(asdict(replace(recorded, plan_length=None)))
+                != _as_json(asdict(replace(wanted_oracle, plan_length=None)))):
+            return False
+        planner = oracle_planner_for(spec.env_id, wanted_oracle)
+    return config.get("planner") == _as_json(asdict(planner))
+
+
+def _as_json(value: Any) -> Any:
+    """``value`` as it reads back from a JSON record (tuples become lists)."""
+    return json.loads(json.dumps(value))
 
 
 def same_recipe(record: dict[str, Any], spec: RunSpec) -> bool:

@@ -71,6 +71,10 @@ def write_summary(results_dir: Path) -> list[dict[str, Any]]:
     for table in sorted({paper_table(r) for r in rows}):
         sections.append(f"## {table}\n\n" + markdown_table(
             [r for r in rows if paper_table(r) == table]))
+    from pcc_agent.oracle import ORACLE_CONFIGS
+
+    own_horizons = ", ".join(f"{env} T = {c.plan_length}" for env, c in ORACLE_CONFIGS.items()
+                             if c.plan_length is not None)
     text = (
         "# Percentage of steps in goal (true state), ours beside the paper's\n\n"
         "Mean ± standard error over all tasks of all models (`all`) and over the best model's "
@@ -78,7 +82,8 @@ def write_summary(results_dir: Path) -> list[dict[str, Any]]:
         "`k of N x M (reduced grid)`: only k of the preset's N models have been run. A preset "
         "name `base+field=value` marks runs with command-line overrides of the preset. "
         "`oracle`: the agents' iLQR-MPC settings (Evaluation settings below) on the true "
-        "state and dynamics (the ceiling of those settings); `no action`: zero actions on the "
+        f"state and dynamics, with the oracle's own horizon where it has one ({own_horizons}: "
+        "docs/planner.md), the ceiling; `no action`: zero actions on the "
         "same tasks (the floor; above 0 where starts lie in the goal region). "
         "`[planner rN]`: rows evaluated by an older planner revision, with that revision's "
         "oracle; they are history, not comparable with the current rows.\n\n"

@@ -27,12 +27,10 @@ from pcc_bench.records import (
     preset_for,
     remove_training_checkpoint,
     resume_point,
-    same_recipe,
-    same_spec,
     stop_reason_of,
     training_checkpoint_path,
 )
-from pcc_bench.weights import save_half_weights, saved_agent_path
+from pcc_bench.weights import record_to_reevaluate, save_half_weights, saved_agent_path
 
 #: Epochs between a run's training checkpoints: a run cut short (Ctrl-C, a crash, the end of
 #: a working session) resumes from its last one; at most this many epochs are redone.
@@ -58,14 +56,8 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
 
     env_kwargs = {"noise_std": spec.noise_std} if spec.noise_std else {}
     seeds = task_seeds(spec.task_seed, spec.num_tasks)
-    trained = load_finished_run(path)
-    if (
-        trained is not None
-        and spec.method not in REFERENCE_METHODS
-        and same_spec(trained.get("spec"), spec)
-        and same_recipe(trained, spec)
-        and saved_agent_path(trained, Path(results_dir), spec) is not None
-    ):
+    trained = record_to_reevaluate(Path(results_dir), spec)
+    if trained is not None:
         return _reevaluate(trained, spec, Path(results_dir), seeds, env_kwargs)
     record: dict[str, Any] = {
         "format": RESULT_FORMAT,
@@ -76,10 +68,10 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     }
     start = time.perf_counter()
     if spec.method == ORACLE:
-        from pcc_agent.oracle import OracleController, oracle_config_for
+        from pcc_agent.oracle import OracleController, oracle_config_for, oracle_planner_for
 
         config = oracle_config_for(spec.env_id)
-        planner = preset_for(spec).planner  # the agents' own settings: a true ceiling
+        planner = oracle_planner_for(spec.env_id, config)
         record["config"] = {"oracle": asdict(config), "planner": asdict(planner),
                             "planner_revision": PLANNER_REVISION}
         record["train_seconds"] = 0.0

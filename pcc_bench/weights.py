@@ -33,6 +33,8 @@ from pcc_bench.records import (
     RunSpec,
     checkpoint_path,
     load_finished_run,
+    same_recipe,
+    same_spec,
     weights_path,
 )
 
@@ -69,6 +71,24 @@ def saved_agent_path(record: dict[str, Any], results_dir: Path, spec: RunSpec) -
         return path if path.exists() else None
     path = checkpoint_path(results_dir, spec)
     return path if path.exists() else None
+
+
+def record_to_reevaluate(results_dir: Path, spec: RunSpec) -> dict[str, Any] | None:
+    """The finished record of a run whose model needs only its control tasks run again.
+
+    That is a record of the run's spec and training recipe, with its weights kept, that is
+    not current (evaluated with other planner settings: :func:`load_finished_run` with the
+    spec refuses it). None where the run is current, untrained, or must train again.
+    """
+    path = Path(results_dir) / spec.relative_path
+    if spec.method in REFERENCE_METHODS or load_finished_run(path, spec) is not None:
+        return None
+    trained = load_finished_run(path)
+    if (trained is None or not same_spec(trained.get("spec"), spec)
+            or not same_recipe(trained, spec)
+            or saved_agent_path(trained, Path(results_dir), spec) is None):
+        return None
+    return trained
 
 
 def export_run(path: Path, results_dir: Path) -> str:

@@ -12,10 +12,13 @@ import torch
 import pcc_envs  # noqa: F401
 from pcc_agent.evaluation import evaluate_control
 from pcc_agent.oracle import (
+    ORACLE_CONFIGS,
+    OracleConfig,
     OracleController,
     TrueDynamics,
     agent_planner_for,
     oracle_config_for,
+    oracle_planner_for,
 )
 from pcc_agent.presets import PRESETS, get_preset
 
@@ -45,6 +48,22 @@ def test_oracle_balances_the_pendulum_with_the_agents_planner():
     result = evaluate_control(lambda env: OracleController(env), env_id, [3])
     # The 400 steps are in goal when balancing from a start inside the goal region.
     assert result.tasks[0].percent_in_goal > 90.0
+
+
+def test_oracle_runs_its_own_horizon_where_it_has_one_and_the_agents_settings_otherwise():
+    for env_id, config in ORACLE_CONFIGS.items():
+        agents, oracle = agent_planner_for(env_id), oracle_planner_for(env_id)
+        horizon = agents.plan_length if config.plan_length is None else config.plan_length
+        assert oracle == dataclasses.replace(agents, plan_length=horizon), env_id
+    # CartPole-v1's agents plan 20 steps; its oracle keeps 50 (docs/planner.md).
+    assert agent_planner_for("pcc/CartPole-v1").plan_length == 20
+    controller = OracleController(gym.make("pcc/CartPole-v1"))
+    assert controller.mpc.config.plan_length == 50
+
+
+def test_oracle_horizon_must_be_positive():
+    with pytest.raises(ValueError, match="plan_length"):
+        OracleConfig(state_weights=(1.0,), plan_length=0)
 
 
 def test_oracle_cost_is_kappa_times_state_weights_and_the_agents_action_weight():

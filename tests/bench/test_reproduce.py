@@ -14,8 +14,13 @@ import pytest
 
 from pcc_agent.planning import PLANNER_REVISION
 from pcc_bench.aggregation import aggregate, interquartile_mean
-from pcc_bench.costs import CheckpointedTraining, checkpointed_trainings, estimate_cost
-from pcc_bench.records import RunSpec, load_finished_run
+from pcc_bench.costs import (
+    CheckpointedTraining,
+    checkpointed_trainings,
+    estimate_cost,
+    reevaluations,
+)
+from pcc_bench.records import RunSpec, load_finished_run, training_progress
 from pcc_bench.runs import execute_run, report_line
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -312,6 +317,12 @@ def test_run_with_old_planner_settings_is_reevaluated_not_retrained(tmp_path):
     record["config"]["planner"]["plan_length"] = 3  # as if the preset's planner had changed
     path.write_text(json.dumps(record))
     assert load_finished_run(path, spec) is None
+    # The status and the cost estimate know that the model only runs its tasks again.
+    assert "control tasks to run again" in training_progress(tmp_path, spec)
+    assert reevaluations(tmp_path, [spec]) == {spec: pytest.approx(first["eval_seconds"])}
+    cost = estimate_cost([spec], reevaluated=reevaluations(tmp_path, [spec]))
+    assert cost.bases == ("re-evaluation",)
+    assert cost.run_seconds == (pytest.approx(first["eval_seconds"]),)
     again = execute_run(spec, tmp_path, str(tmp_path / "data"))
     assert again["reevaluated"] is True and first["config"]["planner_revision"] == PLANNER_REVISION
     assert again["train_seconds"] == first["train_seconds"]
@@ -648,6 +659,30 @@ def test_oracle_record_of_other_oracle_or_planner_settings_is_stale(tmp_path):
                     {"planner": {**planner, "plan_length": planner["plan_length"] + 1}}):
         path.write_text(json.dumps({**record, "config": {**record["config"], **changed}}))
         assert load_finished_run(path, spec) is None
+
+
+def test_oracle_record_with_the_oracles_own_horizon_stays_valid(tmp_path):
+    from pcc_agent.oracle import oracle_config_for, oracle_planner_for
+    from pcc_bench.records import preset_for
+
+    spec = dataclasses.replace(tiny_spec(), env_id="pcc/CartPole-v1", method="oracle",
+                               num_samples=None, max_epochs=None)
+    oracle = oracle_config_for(spec.env_id)
+    agents = preset_for(spec).planner
+    assert oracle.plan_length is not None and oracle.plan_length != agents.plan_length
+    # Written before OracleConfig had plan_length, with the horizon the oracle keeps: valid.
+    older = {k: v for k, v in dataclasses.asdict(oracle).items() if k != "plan_length"}
+    record = {"format": 1, "status": "done", "spec": dataclasses.asdict(spec), "percentages": [],
+              "config": {"oracle": json.loads(json.dumps(older)),
+                         "planner": dataclasses.asdict(oracle_planner_for(spec.env_id)),
+                         "planner_revision": PLANNER_REVISION}}
+    path = tmp_path / "oracle.json"
+    path.write_text(json.dumps(record))
+    assert load_finished_run(path, spec) is not None
+    # Run with the agents' horizon, it is not this oracle.
+    record["config"]["planner"] = dataclasses.asdict(agents)
+    path.write_text(json.dumps(record))
+    assert load_finished_run(path, spec) is None
 
 
 def test_summary_keeps_older_planner_rows_apart_with_their_own_oracle(tmp_path):
