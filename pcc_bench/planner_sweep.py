@@ -211,6 +211,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _write(out: Path, argv: list[str], rows: list[dict[str, Any]],
            summary: list[dict[str, Any]], done: bool) -> None:
+    """Write the sweep so far (``status`` partial until every row is measured)."""
     payload: dict[str, Any] = {
         "command": " ".join(["python -m pcc_bench.planner_sweep", *argv]),
         "status": "done" if done else "partial", "rows": rows}
