@@ -385,7 +385,8 @@ def reevaluations(results_dir: Path, runs: Iterable[RunSpec]) -> dict[RunSpec, f
     """The runs of ``runs`` that only run their control tasks again, and those tasks' seconds.
 
     See :func:`pcc_bench.weights.record_to_reevaluate`; the seconds are the record's own
-    control time (``eval_seconds``), scaled to the run's number of tasks.
+    control time per task (``eval_seconds``) times the run's tasks, its validation tasks
+    included (a re-evaluation runs both).
     """
     from pcc_bench.weights import record_to_reevaluate
 
@@ -394,7 +395,8 @@ def reevaluations(results_dir: Path, runs: Iterable[RunSpec]) -> dict[RunSpec, f
         record = record_to_reevaluate(results_dir, spec)
         if record is not None:
             tasks = max(len(record.get("percentages") or ()), 1)
-            found[spec] = float(record.get("eval_seconds", 0.0)) * spec.num_tasks / tasks
+            per_task = float(record.get("eval_seconds", 0.0)) / tasks
+            found[spec] = per_task * (spec.num_tasks + (spec.validation_tasks or 0))
     return found
 
 

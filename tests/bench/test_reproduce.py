@@ -319,10 +319,11 @@ def test_run_with_old_planner_settings_is_reevaluated_not_retrained(tmp_path):
     assert load_finished_run(path, spec) is None
     # The status and the cost estimate know that the model only runs its tasks again.
     assert "control tasks to run again" in training_progress(tmp_path, spec)
-    assert reevaluations(tmp_path, [spec]) == {spec: pytest.approx(first["eval_seconds"])}
+    control = first["eval_seconds"] * (1 + (spec.validation_tasks or 0) / spec.num_tasks)
+    assert reevaluations(tmp_path, [spec]) == {spec: pytest.approx(control)}
     cost = estimate_cost([spec], reevaluated=reevaluations(tmp_path, [spec]))
     assert cost.bases == ("re-evaluation",)
-    assert cost.run_seconds == (pytest.approx(first["eval_seconds"]),)
+    assert cost.run_seconds == (pytest.approx(control),)
     again = execute_run(spec, tmp_path, str(tmp_path / "data"))
     assert again["reevaluated"] is True and first["config"]["planner_revision"] == PLANNER_REVISION
     assert again["train_seconds"] == first["train_seconds"]
