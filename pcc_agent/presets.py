@@ -184,9 +184,10 @@ _LANE_MODEL = _paper_cnn_model(8, 32, 200, (200,), 300)
 # results/planner_sweep/oracle_<env>.json has every setting tried and its command. Where a
 # full row of learned models then did better with a shorter horizon on tasks of other seeds
 # (2022, 2023; results/planner_sweep/learned/), the row says so and takes it, and the oracle
-# keeps its own horizon (OracleConfig.plan_length). Starting point: the PC3 reference protocol (horizon /
-# replan: planar 40 / 10, pendulum 100 / 10, cartpole 50 / 5, 3-link 200 / 20; q / r:
-# planar 10, pendulum and 3-link 50, cartpole 1000; 3 uniform + 3 extreme initial plans).
+# keeps its own horizon (OracleConfig.plan_length). Starting point: the PC3 reference
+# protocol (horizon / replan: planar 40 / 10, pendulum 100 / 10, cartpole 50 / 5, 3-link
+# 200 / 20; q / r: planar 10, pendulum and 3-link 50, cartpole 1000; 3 uniform + 3 extreme
+# initial plans).
 # Rules: the shortest horizon within 0.5 points of the best oracle score; replanning at
 # every step (refining the shifted plan) wherever the oracle is no worse for it, because a
 # learned model's plan drifts from the true system faster than the oracle's; where the

@@ -182,7 +182,6 @@ def training_progress(results_dir: str | Path, spec: RunSpec) -> str:
     """
     from pcc_agent.checkpoint import CheckpointError, load_checkpoint
     from pcc_agent.presets import get_preset
-
     from pcc_bench.weights import record_to_reevaluate
 
     label = f"{spec.env_id} {spec.method} noise={spec.noise_std} seed={spec.seed}"
