@@ -33,6 +33,7 @@ from pcc_bench.records import (
     RunSpec,
     checkpoint_path,
     load_finished_run,
+    same_planner,
     same_recipe,
     same_spec,
     weights_path,
@@ -76,16 +77,16 @@ def saved_agent_path(record: dict[str, Any], results_dir: Path, spec: RunSpec) -
 def record_to_reevaluate(results_dir: Path, spec: RunSpec) -> dict[str, Any] | None:
     """The finished record of a run whose model needs only its control tasks run again.
 
-    That is a record of the run's spec and training recipe, with its weights kept, that is
-    not current (evaluated with other planner settings: :func:`load_finished_run` with the
-    spec refuses it). None where the run is current, untrained, or must train again.
+    That is a record of the run's spec and training recipe, with its weights kept, that was
+    evaluated with other planner settings. None where the run is current, untrained, or must
+    train again. Reads the record once.
     """
-    path = Path(results_dir) / spec.relative_path
-    if spec.method in REFERENCE_METHODS or load_finished_run(path, spec) is not None:
+    if spec.method in REFERENCE_METHODS:
         return None
-    trained = load_finished_run(path)
+    trained = load_finished_run(Path(results_dir) / spec.relative_path)
     if (trained is None or not same_spec(trained.get("spec"), spec)
             or not same_recipe(trained, spec)
+            or same_planner(trained, spec)  # current: nothing to run again
             or saved_agent_path(trained, Path(results_dir), spec) is None):
         return None
     return trained
