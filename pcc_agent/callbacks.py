@@ -104,6 +104,15 @@ class KeepBestControl(BaseCallback):
         self._save_state()
         return True
 
+    @property
+    def best_state(self) -> dict[str, torch.Tensor] | None:
+        """The best-scoring weights so far (during training; ``None`` before the first score).
+
+        For callers that stop at a moment of their own choosing, such as a wall-clock budget
+        (``pcc_bench.time_to_control``). Treat it as read-only: it is the callback's copy.
+        """
+        return self._best_state
+
     def _save_state(self) -> None:
         if self.state_path is None:
             return

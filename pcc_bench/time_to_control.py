@@ -7,6 +7,11 @@ stopped there (those of the best validation loss so far, as the trainer keeps) a
 Afterwards every kept model runs the control tasks with its domain's planner. A row is
 ``(env, method, train_minutes)`` with the all-model mean over ``n_models`` models x the tasks.
 
+With ``--keep-best-control N`` a model is also scored every ``N`` epochs on 10 validation
+tasks (task seed 2021, never the evaluation tasks), as the rows' trainings are, and a mark
+keeps the best-scoring weights so far instead (the lowest-loss ones before the first score).
+The scoring's time is training time: it counts toward the minutes.
+
 Training stops at the last mark, or earlier by the preset's early stopping: a model that
 stopped before a mark counts at that mark with its final weights (``stopped_early`` in its
 record). Models train in parallel, one per worker process and one torch thread each
@@ -40,6 +45,7 @@ from pcc_agent.io import atomic_save_figure, atomic_write_json
 from pcc_bench.arguments import command_parser
 from pcc_bench.executors import make_executor
 from pcc_bench.paths import DEFAULT_RESULTS_ROOT
+from pcc_bench.presets import CONTROL_SELECTION_TASKS
 from pcc_bench.records import cpu_name
 
 #: Task seed of the evaluation tasks (the paper's protocol; never used to choose a recipe).
@@ -48,9 +54,10 @@ DEFAULT_MINUTES = (2.0, 5.0, 10.0, 15.0)
 DEFAULT_RESULTS_DIR = DEFAULT_RESULTS_ROOT / "time_to_control"
 
 
-def recipe_label(variant: str, lr: float | None) -> str:
-    """The preset variant, with ``+lr=...`` when the learning rate is overridden."""
-    return variant if lr is None else f"{variant}+lr={lr:g}"
+def recipe_label(variant: str, lr: float | None, keep_best_control: int | None = None) -> str:
+    """The preset variant, with ``+lr=...`` and ``+keep_best_control=...`` when they are set."""
+    label = variant if lr is None else f"{variant}+lr={lr:g}"
+    return label if not keep_best_control else f"{label}+keep_best_control={keep_best_control}"
 
 
 def record_path(results_dir: Path, env_id: str, method: str, recipe: str, seed: int,
@@ -63,11 +70,17 @@ def record_path(results_dir: Path, env_id: str, method: str, recipe: str, seed: 
 def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
                        minutes: Sequence[float], max_epochs: int, patience: int,
                        num_tasks: int, task_seed: int, flush_denormals: bool,
-                       lr: float | None = None) -> dict[str, Any]:
-    """Train one model, keep its best weights at each minute mark, evaluate each of them."""
+                       lr: float | None = None,
+                       keep_best_control: int | None = None) -> dict[str, Any]:
+    """Train one model, keep its best weights at each minute mark, evaluate each of them.
+
+    Best: of the lowest validation loss, or with ``keep_best_control`` (epochs between
+    scores) of the best validation-task control score so far.
+    """
     import torch
 
     from pcc_agent.agent import PCCAgent
+    from pcc_agent.callbacks import KeepBestControl, validation_task_score
     from pcc_agent.evaluation import evaluate_control, task_seeds
     from pcc_agent.presets import get_preset
 
@@ -81,6 +94,19 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
     agent = PCCAgent(env_id, method=method, preset=preset, seed=seed, device="cpu")
     best = {"loss": math.inf, "epoch": 0, "state": copy.deepcopy(agent.model.state_dict())}
     kept: list[dict[str, Any]] = []
+    keep = None if not keep_best_control else KeepBestControl(
+        validation_task_score(env_id, CONTROL_SELECTION_TASKS), every=keep_best_control,
+        start=keep_best_control)
+
+    def kept_now(epoch: int) -> dict[str, Any]:
+        mark = {"minutes": marks[len(kept)], "epoch": epoch, "best_epoch": best["epoch"],
+                "val_loss": best["loss"], "state": best["state"], "stopped_early": False}
+        if keep is not None:
+            mark["selected_by"] = "loss"
+            if keep.best_state is not None:  # scored at least once: its best weights
+                mark.update(selected_by="control", best_epoch=keep.best_epoch,
+                            control_score=keep.best_score, state=keep.best_state)
+        return mark
 
     def on_epoch(locals_: dict[str, Any], _globals: dict[str, Any]) -> bool:
         epoch, val_loss = int(locals_["epoch"]), float(locals_["metrics"]["val_loss"])
@@ -88,17 +114,22 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
             best.update(loss=val_loss, epoch=epoch, state=copy.deepcopy(agent.model.state_dict()))
         elapsed = (time.perf_counter() - start) / 60.0
         while len(kept) < len(marks) and elapsed >= marks[len(kept)]:
-            kept.append({"minutes": marks[len(kept)], "epoch": epoch,
-                         "best_epoch": best["epoch"], "val_loss": best["loss"],
-                         "state": best["state"], "stopped_early": False})
+            kept.append(kept_now(epoch))
         return len(kept) < len(marks)
 
-    agent.learn(callback=on_epoch)
+    # The control score runs first, so a mark passed in an epoch sees that epoch's score.
+    agent.learn(callback=on_epoch if keep is None else [keep, on_epoch])
     epochs = agent.train_result.epochs if agent.train_result is not None else 0
-    final_state = copy.deepcopy(agent.model.state_dict())  # the trainer restored its best
+    # The trainer restored its best-loss weights (and KeepBestControl its best-scoring ones).
+    final_state = copy.deepcopy(agent.model.state_dict())
     while len(kept) < len(marks):
-        kept.append({"minutes": marks[len(kept)], "epoch": epochs, "best_epoch": best["epoch"],
-                     "val_loss": best["loss"], "state": final_state, "stopped_early": True})
+        mark = {"minutes": marks[len(kept)], "epoch": epochs, "best_epoch": best["epoch"],
+                "val_loss": best["loss"], "state": final_state, "stopped_early": True}
+        if keep is not None:
+            mark.update(selected_by="control" if keep.best_epoch != -1 else "loss",
+                        best_epoch=keep.best_epoch if keep.best_epoch != -1 else best["epoch"],
+                        control_score=keep.best_score)
+        kept.append(mark)
     seeds = task_seeds(task_seed, num_tasks)
     goal = agent.goal_observation
     marks_out = []
@@ -112,7 +143,9 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
         marks_out.append(mark)
     return {"env": env_id, "method": method, "variant": variant, "seed": seed,
             "task_seed": task_seed, "max_epochs": max_epochs, "patience": patience,
-            "flush_denormals": flush_denormals, "lr": train.lr, "recipe": recipe_label(variant, lr),
+            "flush_denormals": flush_denormals, "lr": train.lr,
+            "keep_best_control_every": keep_best_control or None,
+            "recipe": recipe_label(variant, lr, keep_best_control),
             "epochs_trained": epochs,
             "train_message": agent.train_result.message if agent.train_result else "",
             "marks": marks_out}
@@ -124,7 +157,8 @@ def run_model(job: tuple[str, str, int], settings: dict[str, Any]) -> dict[str, 
     record = train_and_evaluate(env, method, settings["variant"], seed, settings["minutes"],
                                 settings["max_epochs"], settings["patience"],
                                 settings["num_tasks"], settings["task_seed"],
-                                settings["flush_denormals"], settings["lr"])
+                                settings["flush_denormals"], settings["lr"],
+                                settings["keep_best_control"])
     record["cpu"] = cpu_name()
     return record
 
@@ -189,6 +223,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="training minutes at which the model is kept and evaluated")
     parser.add_argument("--lr", type=float, default=None,
                         help="learning rate override (default: the preset's)")
+    parser.add_argument("--keep-best-control", type=int, default=None, metavar="EPOCHS",
+                        help="every EPOCHS epochs score the model on 10 validation tasks (task "
+                        "seed 2021) and keep its best-controlling weights at each mark (the "
+                        "scoring counts as training time; the recipe label says so)")
     parser.add_argument("--max-epochs", type=int, default=1000)
     parser.add_argument("--patience", type=int, default=100)
     parser.add_argument("--num-tasks", type=int, default=10)
@@ -211,8 +249,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if any(m <= 0 for m in args.minutes):
         raise SystemExit(f"--minutes must be positive, got {args.minutes}.")
+    if args.keep_best_control is not None and args.keep_best_control < 1:
+        raise SystemExit(f"--keep-best-control must be >= 1 epoch, got {args.keep_best_control}.")
     flush = not args.no_flush_denormals
-    recipe = recipe_label(args.variant, args.lr)
+    recipe = recipe_label(args.variant, args.lr, args.keep_best_control)
     command = " ".join(["python -m pcc_bench.time_to_control",
                         *(argv if argv is not None else sys.argv[1:])])
     jobs = [(env, method, seed) for env in args.envs for method in args.methods
@@ -227,7 +267,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         settings = {"variant": args.variant, "minutes": args.minutes,
                     "max_epochs": args.max_epochs, "patience": args.patience,
                     "num_tasks": args.num_tasks, "task_seed": args.task_seed,
-                    "flush_denormals": flush, "lr": args.lr}
+                    "flush_denormals": flush, "lr": args.lr,
+                    "keep_best_control": args.keep_best_control}
         failed = 0
         for (env, method, seed), outcome in executor.outcomes(run_model, todo, settings):
             if isinstance(outcome, Exception):

@@ -54,3 +54,27 @@ def test_a_tiny_run_keeps_a_model_per_mark_and_resumes(tmp_path, capsys):
     assert (tmp_path / "time_to_control.png").stat().st_size > 0
     assert ttc.main(args) == 0  # the model is done: nothing is trained again
     assert "1 of 1 models already done; 0 to train" in capsys.readouterr().out
+
+
+def test_recipe_label_names_control_selection():
+    assert ttc.recipe_label("motion", None, 10) == "motion+keep_best_control=10"
+    assert ttc.recipe_label("fast", 1.5e-3, None) == "fast+lr=0.0015"
+
+
+def test_nonpositive_control_interval_is_refused(tmp_path):
+    with pytest.raises(SystemExit, match="--keep-best-control must be >= 1"):
+        ttc.main(["--keep-best-control", "0", "--results-dir", str(tmp_path)])
+
+
+def test_a_mark_keeps_the_best_controlling_weights_when_asked(tmp_path):
+    args = ["--envs", "pcc/Planar-v0", "--seeds", "0", "--minutes", "1e-6", "--max-epochs", "2",
+            "--patience", "0", "--num-tasks", "1", "--workers", "1", "--keep-best-control", "1",
+            "--results-dir", str(tmp_path)]
+    assert ttc.main(args) == 0
+    (path,) = tmp_path.glob("Planar-v0/*keep_best_control=1*.json")
+    record = json.loads(path.read_text())
+    assert record["keep_best_control_every"] == 1
+    (mark,) = record["marks"]
+    # Epoch 1 is scored before its mark is taken, so the mark holds the scored weights.
+    assert mark["selected_by"] == "control" and mark["best_epoch"] == 1
+    assert 0.0 <= mark["control_score"] <= 100.0
