@@ -70,7 +70,7 @@ def chains(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 t0 = time.time()
-frames, actions = chains(a.samples or preset.num_samples, a.horizon)
+frames, actions = chains(a.samples or preset.data.num_samples, a.horizon)
 held_out = collect_transitions(a.env, 3000, seed=999_983)
 print(f"data: {frames.shape} in {time.time() - t0:.0f} s", flush=True)
 n_val = len(frames) // 10
