@@ -10,7 +10,9 @@ actions from the paper's uniform state sampler: a rate left out of the code show
 that grows with ``k``. Weight ``--coef`` per extra step (the one-step term's 0.3 by default).
 The rest is the paper's PCC objective on the chains' first transitions, trained with the
 library's model, loss and Adam settings in a plain loop (not ``pcc_agent.training.Trainer``;
-no early stopping). ``--horizon 1`` is the same loop without the new term.
+no early stopping). ``--horizon 1`` is the same loop without the new term. ``--goal-fraction``
+starts that share of the chains near the goal instead (the arms' balance needs the dynamics
+there, which the uniform sampler visits rarely).
 
 Every ``--every`` epochs it scores k-NN state R^2 on 3,000 held-out transitions and % in
 goal on validation tasks (seed 2021, perturbed starts).
@@ -38,6 +40,11 @@ p.add_argument("--epochs", type=int, default=10)
 p.add_argument("--every", type=int, default=5)
 p.add_argument("--seed", type=int, default=0)
 p.add_argument("--tasks", type=int, default=10)
+p.add_argument("--goal-fraction", type=float, default=0.0,
+               help="share of chains started near the goal state: every angle within "
+               "--goal-angle of it, every rate within --goal-rate (the rest: uniform)")
+p.add_argument("--goal-angle", type=float, default=np.pi / 4)
+p.add_argument("--goal-rate", type=float, default=np.pi)
 p.add_argument("--samples", type=int, default=None, help="chains (default: the preset's data size)")
 p.add_argument("--out", required=True)
 a = p.parse_args()
@@ -51,7 +58,7 @@ rng = np.random.default_rng(a.seed)
 def chains(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Frames ``(n, k + 2, H, W)`` of ``s_0 .. s_{k+1}`` and actions ``(n, k, A)`` (u_1..u_k).
 
-    ``s_0`` is uniform on the sampler's box, ``s_1`` one random action later (the older frame
+    ``s_0`` is uniform on the sampler's box (or, a ``--goal-fraction`` of them, near the goal), ``s_1`` one random action later (the older frame
     of the first observation, as in ``pcc_envs.data.collect_transitions``).
     """
     frames = np.empty((n, k + 2, *env.frame_shape), dtype=np.uint8)
@@ -59,6 +66,10 @@ def chains(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
     for start in range(0, n, 2000):
         m = min(2000, n - start)
         state = env.sample_states(rng, m)
+        near = rng.random(m) < a.goal_fraction
+        half = env.state_dim // 2  # the arms' states: angles, then rates
+        spread = np.r_[np.full(half, a.goal_angle), np.full(half, a.goal_rate)]
+        state[near] = env.goal_state + rng.uniform(-spread, spread, (int(near.sum()), len(spread)))
         frames[start:start + m, 0] = env.render_states(state)
         for step in range(k + 1):
             action = env.sample_action(rng, m).astype(np.float32)
@@ -137,7 +148,7 @@ with flushed_denormals(True):
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
-            losses.append(float(loss))
+            losses.append(float(loss.detach()))
             extras.append(extra)
         print(f"epoch {epoch}: loss {np.mean(losses):.1f}, multi-step {np.mean(extras):.1f}, "
               f"{(time.time() - t0) / 60:.1f} min", flush=True)
