@@ -24,6 +24,8 @@ that is started again skips the models already done (resumable across sessions).
 Usage:
     python -m pcc_bench.time_to_control --envs pcc/Planar-v0 --methods pcc e2c \
         --seeds 0 1 2 --minutes 2 5 10 15 --workers 2
+    python -m pcc_bench.time_to_control --envs pcc/CartPole-v1 --methods pcc --variant motion \
+        --seeds 0 1 2 --minutes 5 10 20 30 --keep-best-control 5 --workers 2
 """
 
 from __future__ import annotations
@@ -94,6 +96,7 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
     agent = PCCAgent(env_id, method=method, preset=preset, seed=seed, device="cpu")
     best = {"loss": math.inf, "epoch": 0, "state": copy.deepcopy(agent.model.state_dict())}
     kept: list[dict[str, Any]] = []
+    val_losses: dict[int, float] = {}  # per epoch: the validation loss of control-kept weights
     keep = None if not keep_best_control else KeepBestControl(
         validation_task_score(env_id, CONTROL_SELECTION_TASKS), every=keep_best_control,
         start=keep_best_control)
@@ -105,11 +108,13 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
             mark["selected_by"] = "loss"
             if keep.best_state is not None:  # scored at least once: its best weights
                 mark.update(selected_by="control", best_epoch=keep.best_epoch,
-                            control_score=keep.best_score, state=keep.best_state)
+                            val_loss=val_losses[keep.best_epoch], control_score=keep.best_score,
+                            state=keep.best_state)
         return mark
 
     def on_epoch(locals_: dict[str, Any], _globals: dict[str, Any]) -> bool:
         epoch, val_loss = int(locals_["epoch"]), float(locals_["metrics"]["val_loss"])
+        val_losses[epoch] = val_loss
         if val_loss < best["loss"] - train.min_delta:
             best.update(loss=val_loss, epoch=epoch, state=copy.deepcopy(agent.model.state_dict()))
         elapsed = (time.perf_counter() - start) / 60.0
@@ -125,10 +130,11 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
     while len(kept) < len(marks):
         mark = {"minutes": marks[len(kept)], "epoch": epochs, "best_epoch": best["epoch"],
                 "val_loss": best["loss"], "state": final_state, "stopped_early": True}
-        if keep is not None:
-            mark.update(selected_by="control" if keep.best_epoch != -1 else "loss",
-                        best_epoch=keep.best_epoch if keep.best_epoch != -1 else best["epoch"],
-                        control_score=keep.best_score)
+        if keep is not None and keep.best_epoch != -1:  # a scored epoch beat the final weights
+            mark.update(selected_by="control", best_epoch=keep.best_epoch,
+                        val_loss=val_losses[keep.best_epoch], control_score=keep.best_score)
+        elif keep is not None:
+            mark.update(selected_by="loss", control_score=keep.best_score)
         kept.append(mark)
     seeds = task_seeds(task_seed, num_tasks)
     goal = agent.goal_observation

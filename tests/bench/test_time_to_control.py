@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
@@ -78,3 +79,4 @@ def test_a_mark_keeps_the_best_controlling_weights_when_asked(tmp_path):
     # Epoch 1 is scored before its mark is taken, so the mark holds the scored weights.
     assert mark["selected_by"] == "control" and mark["best_epoch"] == 1
     assert 0.0 <= mark["control_score"] <= 100.0
+    assert math.isfinite(mark["val_loss"]) and mark["val_loss"] > 0  # the kept epoch's loss
