@@ -134,8 +134,9 @@ def settings_table(rows: list[dict[str, Any]]) -> str:
             recipe += (f"; each model the best of {registered.restarts} trainings by "
                        "validation loss")
         if registered is not None and registered.spare_trainings:
-            recipe += (f"; the {registered.num_models} of "
-                       f"{registered.num_models + registered.spare_trainings} trainings that "
+            # The row's own count: a grid run with --num-models keeps that many.
+            kept = row["n_models"]
+            recipe += (f"; the {kept} of {kept + registered.spare_trainings} trainings that "
                        "control best on validation tasks (task seed 2021)")
         every = _override(preset, "keep_best_control_every")
         if every is not None:

@@ -1006,3 +1006,11 @@ def test_a_run_with_validation_tasks_records_its_validation_control(tmp_path):
     # The evaluation tasks are planned exactly as without validation tasks.
     plain = execute_run(tiny_spec(), tmp_path / "plain", str(tmp_path / "data"))
     assert plain["percentages"] == record["percentages"] and "validation" not in plain
+
+
+def test_settings_table_counts_the_kept_trainings_of_a_grown_spare_grid():
+    from pcc_bench.tables import settings_table
+
+    row = {"env": "pcc/Planar-v0", "preset": "quick", "method": "pcc", "n_models": 10,
+           "n_tasks": 10, "seeds": [0, 1, *range(3, 11)], "settings": {"planner": {}}}
+    assert "the 10 of 11 trainings that control best" in settings_table([row])
