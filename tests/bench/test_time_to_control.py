@@ -38,10 +38,14 @@ def test_nonpositive_minutes_are_refused(tmp_path):
         ttc.main(["--minutes", "0", "--results-dir", str(tmp_path)])
 
 
+def _tiny_run(tmp_path, *extra: str) -> list[str]:
+    """Arguments of a one-model Planar run of at most 2 epochs and 1 task, plus ``extra``."""
+    return ["--envs", "pcc/Planar-v0", "--seeds", "0", "--max-epochs", "2", "--patience", "0",
+            "--num-tasks", "1", "--workers", "1", "--results-dir", str(tmp_path), *extra]
+
+
 def test_a_tiny_run_keeps_a_model_per_mark_and_resumes(tmp_path, capsys):
-    args = ["--envs", "pcc/Planar-v0", "--seeds", "0", "--minutes", "1e-6", "2e-6",
-            "--max-epochs", "2", "--patience", "0", "--num-tasks", "1", "--workers", "1",
-            "--results-dir", str(tmp_path)]
+    args = _tiny_run(tmp_path, "--minutes", "1e-6", "2e-6")
     assert ttc.main(args) == 0
     (path,) = tmp_path.glob("Planar-v0/*.json")
     record = json.loads(path.read_text())
@@ -68,9 +72,7 @@ def test_nonpositive_control_interval_is_refused(tmp_path):
 
 
 def test_a_mark_keeps_the_best_controlling_weights_when_asked(tmp_path):
-    args = ["--envs", "pcc/Planar-v0", "--seeds", "0", "--minutes", "1e-6", "--max-epochs", "2",
-            "--patience", "0", "--num-tasks", "1", "--workers", "1", "--keep-best-control", "1",
-            "--results-dir", str(tmp_path)]
+    args = _tiny_run(tmp_path, "--minutes", "1e-6", "--keep-best-control", "1")
     assert ttc.main(args) == 0
     (path,) = tmp_path.glob("Planar-v0/*keep_best_control=1*.json")
     record = json.loads(path.read_text())
