@@ -230,9 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--lr", type=float, default=None,
                         help="learning rate override (default: the preset's)")
     parser.add_argument("--keep-best-control", type=int, default=None, metavar="EPOCHS",
-                        help="every EPOCHS epochs score the model on 10 validation tasks (task "
-                        "seed 2021) and keep its best-controlling weights at each mark (the "
-                        "scoring counts as training time; the recipe label says so)")
+                        help=f"every EPOCHS epochs score the model on {CONTROL_SELECTION_TASKS} "
+                        "validation tasks (task seed 2021) and keep its best-controlling "
+                        "weights at each mark (the scoring counts as training time; the "
+                        "recipe label says so)")
     parser.add_argument("--max-epochs", type=int, default=1000)
     parser.add_argument("--patience", type=int, default=100)
     parser.add_argument("--num-tasks", type=int, default=10)
