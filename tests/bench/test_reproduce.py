@@ -920,11 +920,17 @@ def test_cost_estimate_prefers_this_machine_and_scales_epochs_for_another_cap():
 
 
 def test_status_of_the_quick_preset_comes_from_its_committed_runs(tmp_path, capsys):
-    """The quick grid took 7 min 24 s (results/quick/COMMAND); --status must say about that."""
+    """The quick grid took 7 min 24 s (results/quick/COMMAND); its runs must estimate about that.
+
+    Other committed grids hold quick runs of other machines and loads (the 10-model Planar row
+    trained beside another job on an AMD EPYC, about 1.8 times slower), so ``--status`` on
+    this machine is checked against the estimate from every committed record instead.
+    """
     from pcc_bench.costs import load_timing_records, timing_directories
     from pcc_bench.grid import expand_grid
     from pcc_bench.paths import COMMITTED_RESULTS_DIR
     from pcc_bench.presets import REPRODUCE_PRESETS
+    from pcc_bench.records import machine_info
     from pcc_bench.reproduce import main
 
     quick = COMMITTED_RESULTS_DIR / "quick"
@@ -932,20 +938,21 @@ def test_status_of_the_quick_preset_comes_from_its_committed_runs(tmp_path, caps
         pytest.skip("no committed results (not a source checkout)")
     measured = 7 * 60 + 24
     runs = expand_grid(REPRODUCE_PRESETS["quick"])
-    records = load_timing_records(timing_directories(tmp_path))
     machine = json.loads(next((quick / "runs").rglob("seed0.json")).read_text())["machine"]
     for here in (machine, None):  # on the machine that ran it, and on an unknown one
-        cost = estimate_cost(runs, records, here)
+        cost = estimate_cost(runs, load_timing_records([quick]), here)
         assert cost.runs_from_records == len(runs) == 6
         assert measured / 1.5 < cost.wall_seconds(2) < measured * 1.5
         assert cost.upper_wall_seconds(2) >= cost.wall_seconds(2)
+    expected = estimate_cost(runs, load_timing_records(timing_directories(tmp_path)),
+                             machine_info()).wall_seconds(2)
     assert main(["--status", "--results-dir", str(tmp_path), "--workers", "2"]) == 0
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if x.startswith("Preset 'quick'"))
     minutes = float(line.split("estimated ")[1].split(" min")[0])
-    assert measured / 1.5 < 60 * minutes < measured * 1.5
+    assert 60 * minutes == pytest.approx(expected, abs=3.0)  # printed to 0.1 min
     assert "Based on: 6 runs from the mean time of finished runs of the same kind" in out
-    assert "results/quick" in out
+    assert "results/quick" in out or "results/reproduce" in out  # it names its sources
 
 
 def test_spare_trainings_keep_the_models_that_control_best_on_validation_tasks():
