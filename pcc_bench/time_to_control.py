@@ -101,15 +101,19 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
         validation_task_score(env_id, CONTROL_SELECTION_TASKS), every=keep_best_control,
         start=keep_best_control)
 
-    def kept_now(epoch: int) -> dict[str, Any]:
+    def mark_of(epoch: int, state: Any, stopped_early: bool,
+                control_epoch: int | None) -> dict[str, Any]:
+        """The next mark: the lowest-loss weights' facts, or those of ``control_epoch``."""
         mark = {"minutes": marks[len(kept)], "epoch": epoch, "best_epoch": best["epoch"],
-                "val_loss": best["loss"], "state": best["state"], "stopped_early": False}
-        if keep is not None:
-            mark["selected_by"] = "loss"
-            if keep.best_state is not None:  # scored at least once: its best weights
-                mark.update(selected_by="control", best_epoch=keep.best_epoch,
-                            val_loss=val_losses[keep.best_epoch], control_score=keep.best_score,
-                            state=keep.best_state)
+                "val_loss": best["loss"], "state": state, "stopped_early": stopped_early}
+        if keep is None:
+            return mark
+        mark["selected_by"] = "loss"
+        if keep.best_score is not None:
+            mark["control_score"] = keep.best_score
+        if control_epoch is not None:
+            mark.update(selected_by="control", best_epoch=control_epoch,
+                        val_loss=val_losses[control_epoch])
         return mark
 
     def on_epoch(locals_: dict[str, Any], _globals: dict[str, Any]) -> bool:
@@ -119,7 +123,10 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
             best.update(loss=val_loss, epoch=epoch, state=copy.deepcopy(agent.model.state_dict()))
         elapsed = (time.perf_counter() - start) / 60.0
         while len(kept) < len(marks) and elapsed >= marks[len(kept)]:
-            kept.append(kept_now(epoch))
+            if keep is not None and keep.best_state is not None:  # scored: its best weights
+                kept.append(mark_of(epoch, keep.best_state, False, keep.best_epoch))
+            else:
+                kept.append(mark_of(epoch, best["state"], False, None))
         return len(kept) < len(marks)
 
     # The control score runs first, so a mark passed in an epoch sees that epoch's score.
@@ -127,15 +134,10 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
     epochs = agent.train_result.epochs if agent.train_result is not None else 0
     # The trainer restored its best-loss weights (and KeepBestControl its best-scoring ones).
     final_state = copy.deepcopy(agent.model.state_dict())
+    # -1: the trainer's final weights scored at least as well as every scored epoch.
+    control_epoch = None if keep is None or keep.best_epoch == -1 else keep.best_epoch
     while len(kept) < len(marks):
-        mark = {"minutes": marks[len(kept)], "epoch": epochs, "best_epoch": best["epoch"],
-                "val_loss": best["loss"], "state": final_state, "stopped_early": True}
-        if keep is not None and keep.best_epoch != -1:  # a scored epoch beat the final weights
-            mark.update(selected_by="control", best_epoch=keep.best_epoch,
-                        val_loss=val_losses[keep.best_epoch], control_score=keep.best_score)
-        elif keep is not None:
-            mark.update(selected_by="loss", control_score=keep.best_score)
-        kept.append(mark)
+        kept.append(mark_of(epochs, final_state, True, control_epoch))
     seeds = task_seeds(task_seed, num_tasks)
     goal = agent.goal_observation
     marks_out = []
