@@ -27,10 +27,13 @@ __all__ = [
     "EVALUATION_TASK_SEED",
     "VALIDATION_TASK_SEED",
     "ControlEvaluation",
+    "GoalHold",
     "TaskResult",
     "evaluate_control",
+    "evaluate_goal_hold",
     "evaluate_on_validation_tasks",
     "format_mean_se",
+    "goal_hold_starts",
     "standard_error",
     "task_seeds",
 ]
@@ -218,3 +221,137 @@ def evaluate_on_validation_tasks(
     options = {"start": "validation"} if env_id.startswith("pcc/") else None
     return evaluate_control(policy, env_id, task_seeds(VALIDATION_TASK_SEED, num_tasks),
                             env_kwargs, reset_options=options)
+
+
+@dataclass(frozen=True)
+class GoalHold:
+    """How long a controller keeps the true state in the goal region from starts near the goal.
+
+    Swing-up and balancing tasks fail in two ways: the controller never reaches the goal, or
+    it reaches it and cannot stay (an upright pole or arm is unstable). The paper's metric mixes
+    the two; this separates them.
+
+    Attributes:
+        env_id: The env the starts are in.
+        starts: The true start states, each inside the goal region.
+        steps_held: Per start, the steps until the true state first leaves the goal region (or
+            the episode ends early); ``horizon`` if it never does.
+        horizon: Steps of each episode.
+    """
+
+    env_id: str
+    starts: list[list[float]]
+    steps_held: list[int]
+    horizon: int
+
+    @property
+    def mean_steps(self) -> float:
+        """Mean steps held over the starts."""
+        return float(np.mean(self.steps_held))
+
+    @property
+    def held_fraction(self) -> float:
+        """Share of the starts held for the whole horizon."""
+        return float(np.mean([steps == self.horizon for steps in self.steps_held]))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly representation (with the mean and the held share)."""
+        return {"env_id": self.env_id, "starts": self.starts, "steps_held": self.steps_held,
+                "horizon": self.horizon, "mean_steps": self.mean_steps,
+                "held_fraction": self.held_fraction}
+
+
+def goal_hold_starts(env: Any, num_starts: int, spread: float = 0.05,
+                     seed: int = 0) -> np.ndarray:
+    """``num_starts`` true states inside the goal region, close to the goal state.
+
+    Each is the env's goal state moved by ``U(-spread, spread)`` times the half-width of its
+    sampler box in every coordinate (rates included, so the starts are nearly at rest); draws
+    outside the box or the goal region are drawn again.
+
+    Args:
+        env: A ``pcc_envs`` environment (wrapped or not): it needs ``goal_state``,
+            ``state_low`` / ``state_high`` and ``in_goal``.
+        num_starts: How many starts.
+        spread: Size of the start region, as a share of the sampler box's half-width.
+        seed: Seed of the draws.
+
+    Returns:
+        The starts, shape ``(num_starts, state_dim)``.
+
+    Raises:
+        ValueError: The env lacks a goal state, sampler box or goal test; ``num_starts`` below
+            1 or ``spread`` not positive; or hardly any draw lands in the goal region.
+    """
+    core = getattr(env, "unwrapped", env)
+    missing = [name for name in ("goal_state", "state_low", "state_high", "in_goal")
+               if getattr(core, name, None) is None]
+    if missing:
+        raise ValueError(f"A goal hold needs an env with a goal state, a sampler box and a goal "
+                         f"test; {type(core).__name__} lacks {', '.join(missing)}.")
+    if num_starts < 1 or not spread > 0:
+        raise ValueError(f"num_starts must be >= 1 and spread > 0, got {num_starts}, {spread}.")
+    rng = np.random.default_rng(seed)
+    goal = np.asarray(core.goal_state, dtype=np.float64)
+    low, high = np.asarray(core.state_low), np.asarray(core.state_high)
+    starts: list[np.ndarray] = []
+    max_draws = 1000 * num_starts
+    for _ in range(max_draws):
+        state = goal + rng.uniform(-spread, spread, goal.shape) * (high - low) / 2.0
+        if np.all(state >= low) and np.all(state <= high) and core.in_goal(state):
+            starts.append(state)
+            if len(starts) == num_starts:
+                return np.stack(starts)
+    raise ValueError(f"Only {len(starts)} of {max_draws} draws within spread {spread} of the "
+                     f"goal state fell inside the goal region; use a smaller spread.")
+
+
+def evaluate_goal_hold(
+    policy: PolicyLike | Callable[[gym.Env], PolicyLike],
+    env_id: str,
+    num_starts: int = 5,
+    horizon: int = 100,
+    spread: float = 0.05,
+    seed: int = 0,
+    env_kwargs: dict[str, Any] | None = None,
+) -> GoalHold:
+    """Start in the goal region, near the goal state, and count the steps the controller stays.
+
+    One episode of ``horizon`` steps per start of :func:`goal_hold_starts`
+    (``reset(options={"state": s})``), run by :func:`evaluate_control`.
+
+    Args:
+        policy: As for :func:`evaluate_control` (an agent, an SB3 model, or a factory
+            ``env -> policy`` such as the oracle).
+        env_id: A registered ``pcc/`` id.
+        num_starts: Episodes, one per start.
+        horizon: Steps of each episode (the env's time limit is set to it).
+        spread: Size of the start region (see :func:`goal_hold_starts`).
+        seed: Seed of the starts.
+        env_kwargs: Extra keyword arguments for ``gym.make`` (e.g. ``noise_std``).
+
+    Returns:
+        The :class:`GoalHold`.
+
+    Raises:
+        ValueError: ``horizon`` below 1, or see :func:`goal_hold_starts`.
+    """
+    if horizon < 1:
+        raise ValueError(f"horizon must be >= 1, got {horizon}.")
+    if env_id.startswith("pcc/"):
+        import pcc_envs  # noqa: F401  (registers the pcc/ ids)
+    kwargs = {**(env_kwargs or {}), "max_episode_steps": int(horizon)}
+    env = gym.make(env_id, **kwargs)
+    try:
+        starts = goal_hold_starts(env, num_starts, spread, seed)
+        core = env.unwrapped
+        steps_held = []
+        for index, start in enumerate(starts):
+            task = evaluate_control(policy, env_id, [index], kwargs,
+                                    reset_options={"state": start}).tasks[0]
+            inside = [bool(core.in_goal(np.asarray(s))) for s in task.states]
+            steps_held.append(inside.index(False) if False in inside else len(inside))
+    finally:
+        env.close()
+    return GoalHold(env_id=env_id, starts=starts.tolist(), steps_held=steps_held,
+                    horizon=int(horizon))

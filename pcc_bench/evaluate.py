@@ -9,11 +9,14 @@ settings) and the no-action floor (zero actions), read from the reproduction rec
 
 ``MODEL`` is a saved agent's file or the name of a pretrained agent shipped with the package
 (``pcc_agent.zoo``), which then runs in seconds and prints the score it was shipped with.
+``--hold`` also starts the agent inside the goal region and counts how long it stays there
+(:func:`pcc_agent.evaluation.evaluate_goal_hold`), beside the oracle.
 
 Examples:
     pcc evaluate planar-pcc --picture planar.png
     python -m pcc_bench.evaluate pcc_results/models/Planar-v0_pcc_seed0.pt
     python -m pcc_bench.evaluate planar_e2c.pt --num-tasks 3 --json planar_e2c_eval.json
+    pcc evaluate pendulum-swingup-pcc --hold
 """
 
 from __future__ import annotations
@@ -75,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: the repository's committed results).")
     parser.add_argument("--picture", type=Path, default=None, metavar="PNG",
                         help="Also draw the first task's controlled episode to this PNG.")
+    parser.add_argument("--hold", action="store_true",
+                        help="Also start 5 times inside the goal region, near the goal state, "
+                        "and count the steps of 100 the agent stays there, beside the "
+                        "oracle's where the env has cheap true dynamics: tells a controller "
+                        "that cannot reach the goal from one that cannot stay.")
     parser.add_argument("--json", type=Path, default=None,
                         help="Also write the per-task results to this JSON file.")
     return parser
@@ -137,6 +145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if all(v is None for v in references.values()):
         print("No oracle or no-action records of these tasks (the references are kept for the "
               f"{_PAPER.num_tasks}\nevaluation tasks) in --references-dir {args.references_dir}")
+    hold = _print_goal_hold(agent, env_id, env_kwargs) if args.hold else None
     if args.picture is not None:
         from pcc_bench.episode_figure import plot_controlled_episode
 
@@ -147,9 +156,35 @@ def main(argv: Sequence[str] | None = None) -> int:
             "model": str(args.model), "env_id": env_id, "method": agent.method,
             "noise_std": args.noise, "task_seeds": seeds, "percentages": ours.tolist(),
             "mean": evaluation.mean, "oracle": means[ORACLE], "no_action": means[NO_ACTION],
+            **({} if hold is None else {"goal_hold": hold}),
         })
         print(f"Wrote {args.json}")
     return 0
+
+
+def _print_goal_hold(agent: Any, env_id: str, env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Print the agent's goal hold beside the oracle's; return both as JSON-friendly dicts."""
+    import gymnasium as gym
+
+    from pcc_agent.evaluation import evaluate_goal_hold
+    from pcc_agent.oracle import OracleController
+
+    held = {agent.method: evaluate_goal_hold(agent, env_id, env_kwargs=env_kwargs)}
+    probe = gym.make(env_id)
+    has_oracle = getattr(probe.unwrapped, "supports_oracle", False)
+    probe.close()
+    if has_oracle:
+        held[ORACLE] = evaluate_goal_hold(lambda env: OracleController(env), env_id,
+                                          env_kwargs=env_kwargs)
+    first = next(iter(held.values()))
+    rows: list[list[Any]] = [
+        [k + 1, " ".join(f"{x:.2f}" for x in start), *(h.steps_held[k] for h in held.values())]
+        for k, start in enumerate(first.starts)]
+    rows.append(["mean", "", *(f"{h.mean_steps:.1f}" for h in held.values())])
+    print(f"\nGoal hold: steps of {first.horizon} in the goal region from starts inside it, "
+          "near the goal state")
+    print(terminal_table(["start", "true state", *held], rows))
+    return {name: h.to_dict() for name, h in held.items()}
 
 
 if __name__ == "__main__":

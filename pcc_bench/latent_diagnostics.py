@@ -18,7 +18,10 @@ tasks), and whether the held-out states coded nearest the goal are near it in st
 puts a distant state there), and, on envs with cheap true dynamics, how the latent dynamics
 predict and feel the action near the goal (:func:`pcc_agent.diagnostics.goal_prediction`:
 the 10-step open-loop error over that of standing still, and the action's one-step effect
-over the one-step error). Nothing is retrained and no control task is rerun.
+over the one-step error), and how many steps the agent keeps the true state in the goal region
+when started inside it (:func:`pcc_agent.evaluation.evaluate_goal_hold`, 5 starts near the
+goal state, 100 steps: low for a controller that reaches the goal but cannot stay). Nothing
+is retrained and no control task is rerun.
 
 Usage:
     python -m pcc_bench.latent_diagnostics --results-dir results/reproduce \
@@ -48,7 +51,7 @@ HELD_OUT_SEED = 1_000_000
 MIN_SAMPLES = 30
 DIAGNOSTICS = ("consistency_error", "curvature", "latent_scale", "best_validation_loss",
                "min_state_r2", "goal_drift", "goal_spectral_radius", "goal_path_barrier",
-               "goal_aliasing", "goal_prediction_error", "goal_action_effect")
+               "goal_aliasing", "goal_prediction_error", "goal_action_effect", "goal_hold_steps")
 
 
 def spearman(x: Sequence[float], y: Sequence[float]) -> float | None:
@@ -105,6 +108,7 @@ def _diagnose_run(
         latent_diagnostics,
         state_decodability,
     )
+    from pcc_agent.evaluation import evaluate_goal_hold
 
     spec = RunSpec(**record["spec"])
     if (spec.method in REFERENCE_METHODS or spec.env_id != env_id or spec.preset != preset
@@ -131,6 +135,8 @@ def _diagnose_run(
             for start in distinct], weights=counts))
     near_goal = (goal_prediction(agent.model, env)
                  if getattr(env.unwrapped, "supports_oracle", False) else None)
+    hold = evaluate_goal_hold(agent, env_id, env_kwargs={"noise_std": spec.noise_std}
+                              if spec.noise_std else None).mean_steps
     print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
           f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
           f"R^2 {np.round(state_r2, 2).tolist()}, at the goal: drift {at_goal.drift:.3f}, "
@@ -138,7 +144,8 @@ def _diagnose_run(
           f"{'-' if barrier is None else f'{barrier:.2f}'}, goal aliasing {aliasing:.2f}"
           + ("" if near_goal is None else
              f", near the goal: prediction error / hold {near_goal.error_over_hold:.2f}, "
-             f"action effect {near_goal.action_effect:.3f}"), flush=True)
+             f"action effect {near_goal.action_effect:.3f}")
+          + f", goal hold {hold:.1f} steps of 100", flush=True)
     return {
         "env": env_id, "preset": preset, "method": spec.method, "seed": spec.seed,
         "noise_std": spec.noise_std, "percent_in_goal": float(record["mean"]),
@@ -152,6 +159,7 @@ def _diagnose_run(
         "goal_aliasing": aliasing,
         "goal_prediction_error": None if near_goal is None else near_goal.error_over_hold,
         "goal_action_effect": None if near_goal is None else near_goal.action_effect,
+        "goal_hold_steps": hold,
     }
 
 
@@ -213,21 +221,22 @@ def markdown(
         "| method | seed | % in goal | consistency error | curvature | latent scale "
         "| best val. loss | state R^2 (k-NN, per coordinate) | goal drift "
         "| goal spectral radius | goal path barrier | goal aliasing "
-        "| goal prediction error | goal action effect |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| goal prediction error | goal action effect | goal hold |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         val = "-" if r["best_validation_loss"] is None else f"{r['best_validation_loss']:.1f}"
-        barrier, aliasing, prediction, effect = (
+        barrier, aliasing, prediction, effect, hold = (
             "-" if r.get(key) is None else f"{r[key]:.{digits}f}"
             for key, digits in (("goal_path_barrier", 2), ("goal_aliasing", 2),
-                                ("goal_prediction_error", 2), ("goal_action_effect", 3)))
+                                ("goal_prediction_error", 2), ("goal_action_effect", 3),
+                                ("goal_hold_steps", 1)))
         lines.append(
             f"| {r['method']} | {r['seed']} | {r['percent_in_goal']:.1f} "
             f"| {r['consistency_error']:.4f} | {r['curvature']:.2e} | {r['latent_scale']:.2f} "
             f"| {val} | {', '.join(f'{v:.2f}' for v in r['state_r2'])} "
             f"| {r['goal_drift']:.3f} | {r['goal_spectral_radius']:.3f} "
-            f"| {barrier} | {aliasing} | {prediction} | {effect} |"
+            f"| {barrier} | {aliasing} | {prediction} | {effect} | {hold} |"
         )
     lines += ["", "Goal drift: one step with no action from the goal's code, in units of the "
               "latent scale. Goal spectral radius: the largest eigenvalue modulus of the "
@@ -243,7 +252,9 @@ def markdown(
               "nothing moves (below 1: better than standing still). Goal action effect: the "
               "action's one-step effect on the predicted code over the one-step prediction "
               "error (well below 1: the planner steers a response lost in the model's "
-              "error)."]
+              "error). Goal hold: from 5 starts inside the goal region near the goal state, "
+              "the mean steps of 100 until the agent lets the true state leave it (low: it "
+              "may reach the goal but cannot stay)."]
     if true_goal is not None:
         lines[-1] += (f" The true dynamics at the goal state: spectral radius "
                       f"{true_goal['spectral_radius']:.3f}, eigenvalue moduli "

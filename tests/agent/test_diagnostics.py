@@ -277,6 +277,7 @@ def test_cli_on_a_tiny_grid(tmp_path):
     assert "--preset tiny" in result["command"]
     text = out.with_name(out.name + ".md").read_text()
     assert "| pcc | 2 |" in text and "goal path barrier | goal aliasing |" in text
+    assert "goal action effect | goal hold |" in text and "Goal hold: from 5 starts" in text
     # Planar's true dynamics are x + u: every eigenvalue is 1.
     assert "The true dynamics at the goal state: spectral radius 1.000" in text
     assert result["true_goal_linearization"]["eigenvalue_moduli"] == pytest.approx([1.0, 1.0])
@@ -286,6 +287,7 @@ def test_cli_on_a_tiny_grid(tmp_path):
         assert row["goal_drift"] >= 0 and row["goal_spectral_radius"] > 0
         assert row["goal_path_barrier"] is not None and row["goal_path_barrier"] >= 0
         assert row["goal_aliasing"] >= 0
+        assert 0 <= row["goal_hold_steps"] <= 100
     with pytest.raises(SystemExit, match="at least 30"):
         cli.main(["--results-dir", str(tmp_path), "--preset", "tiny", "--samples", "20",
                   "--output", str(out)])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import json
 from pathlib import Path
 
 import pytest
@@ -52,12 +53,15 @@ def test_train_then_evaluate(tmp_path, capsys):
                      "--no-progress"]) == 0
     assert model.exists()
     capsys.readouterr()
-    assert cli.main(["evaluate", str(model), "--num-tasks", "2", "--json",
+    assert cli.main(["evaluate", str(model), "--num-tasks", "2", "--hold", "--json",
                      str(tmp_path / "eval.json")]) == 0
     out = capsys.readouterr().out
     assert "pcc on pcc/Planar-v0" in out and "oracle" in out and "mean" in out
+    assert "Goal hold: steps of 100 in the goal region" in out
     assert max(len(line) for line in out.splitlines() if str(tmp_path) not in line) <= 100
-    assert (tmp_path / "eval.json").exists()
+    hold = json.loads((tmp_path / "eval.json").read_text())["goal_hold"]
+    assert set(hold) == {"pcc", "oracle"} and hold["pcc"]["starts"] == hold["oracle"]["starts"]
+    assert all(0 <= steps <= 100 for steps in hold["pcc"]["steps_held"])
 
 
 def test_train_keeps_the_weights_that_control_best(tmp_path, capsys):
