@@ -1,7 +1,8 @@
 """Which trained models control well, and why: latent diagnostics of every finished run.
 
 For every finished model run of a reproduction results directory whose saved agent is still there
-(``checkpoints/``, written by ``pcc_bench.reproduce``), this measures
+(the float16 weights the record was evaluated with, else the float32 ``checkpoints/``, both
+written by ``pcc_bench.reproduce``), this measures
 :func:`pcc_agent.diagnostics.latent_diagnostics` on held-out transitions. The transitions
 are the same for every model: the env's uniform sampler with a seed no model was trained
 on. It writes the results beside the run's control score and best validation loss, with
@@ -44,6 +45,7 @@ from pcc_agent.io import atomic_write_json, atomic_write_text
 from pcc_bench.aggregation import is_restart_training
 from pcc_bench.arguments import command_parser
 from pcc_bench.records import REFERENCE_METHODS, RunSpec, checkpoint_path, load_records
+from pcc_bench.weights import saved_agent_path
 
 #: Seed of the held-out transitions (the grids train on seeds 0, 1, ...).
 HELD_OUT_SEED = 1_000_000
@@ -114,9 +116,10 @@ def _diagnose_run(
     if (spec.method in REFERENCE_METHODS or spec.env_id != env_id or spec.preset != preset
             or is_restart_training(record["spec"])):  # the grid's models 0 .. N-1 only
         return None
-    agent_file = checkpoint_path(results_dir, spec)
-    if not agent_file.exists():
-        print(f"No saved agent for {spec.method} seed {spec.seed} ({agent_file}); skipped.")
+    agent_file = saved_agent_path(record, results_dir, spec)
+    if agent_file is None:
+        print(f"No saved agent for {spec.method} seed {spec.seed} (neither weights nor "
+              f"{checkpoint_path(results_dir, spec)}); skipped.")
         return None
     data = _held_out_transitions(env_id, num_samples, spec.noise_std)
     agent = PCCAgent.load(agent_file, device="cpu")

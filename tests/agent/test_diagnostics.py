@@ -260,7 +260,7 @@ def test_spearman_matches_known_values():
 
 
 def test_cli_on_a_tiny_grid(tmp_path):
-    from pcc_bench.records import RunSpec
+    from pcc_bench.records import RunSpec, checkpoint_path
     from pcc_bench.runs import execute_run
 
     for seed in (0, 1, 2):
@@ -268,6 +268,7 @@ def test_cli_on_a_tiny_grid(tmp_path):
                        num_tasks=1, task_seed=7, model_variant="paper", preset="tiny",
                        num_samples=128, max_epochs=1)
         execute_run(spec, tmp_path, str(tmp_path / "data"))
+    checkpoint_path(tmp_path, spec).unlink()  # seed 2: its float16 weights are enough
     out = tmp_path / "diag" / "Planar-v0_tiny"
     assert cli.main(["--results-dir", str(tmp_path), "--preset", "tiny", "--samples", "50",
                      "--output", str(out)]) == 0
