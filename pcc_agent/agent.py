@@ -48,7 +48,13 @@ from pcc_agent.model import EmbeddingModel
 from pcc_agent.planning import PLANNER_REVISION
 from pcc_agent.planning.cost import QuadraticCost
 from pcc_agent.planning.mpc import LatentMPC
-from pcc_agent.training import TrainResult, resolve_device, train_embedding
+from pcc_agent.training import (
+    TrainResult,
+    TransitionArrays,
+    dataset_arrays,
+    resolve_device,
+    train_embedding,
+)
 
 __all__ = ["PCCAgent", "action_bounds", "collect_random_rollouts", "sb3_logger"]
 
@@ -259,8 +265,9 @@ class PCCAgent:
         self.logger.dump(self.num_timesteps)
 
     # ------------------------------------------------------------------ learning
-    def _collect(self, num_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _collect(self, num_samples: int) -> TransitionArrays:
         core = self.env.unwrapped
+        horizon = self.preset.train.prediction_horizon
         if self.env_id.startswith("pcc/") and hasattr(core, "sample_state"):
             from pcc_envs.data import load_or_collect
 
@@ -272,9 +279,15 @@ class PCCAgent:
                 noise_std=self.preset.data.noise_std,
                 env_kwargs=kwargs or None,
                 cache_dir=self.data_cache_dir,
+                prediction_horizon=horizon,
             )
-            return data.obs, data.action, data.next_obs
-        return collect_random_rollouts(self.env, num_samples, self.seed)
+            return dataset_arrays(data)
+        if horizon > 1:
+            raise ValueError(
+                f"prediction_horizon {horizon} needs {horizon} consecutive transitions per "
+                f"sample, which only the pcc/ envs' sampler collects; pass them as learn("
+                f"dataset=...) with future_action and future_obs, or use prediction_horizon 1.")
+        return dataset_arrays(collect_random_rollouts(self.env, num_samples, self.seed))
 
     def learn(
         self,
@@ -328,17 +341,18 @@ class PCCAgent:
             )
         sb3_callback = as_sb3_callback(callback)  # refuse a wrong one before any work
         if dataset is not None:
-            if isinstance(dataset, tuple):
-                obs, action, next_obs = dataset
-            else:
-                obs, action, next_obs = dataset.obs, dataset.action, dataset.next_obs
+            data = dataset_arrays(dataset)
         else:
             n = self.preset.data.num_samples if total_timesteps is None else int(total_timesteps)
             if n < 2:
                 raise ValueError(f"total_timesteps must be >= 2, got {n}.")
-            obs, action, next_obs = self._collect(n)
+            data = self._collect(n)
+        obs = data.obs
         check_observations(obs[:1], self.obs_shape, single=False)
-        action = self._actions.scale(action) if not self._actions.identity else action
+        if not self._actions.identity:
+            data = dataclasses.replace(data, action=self._actions.scale(data.action), **(
+                {} if data.future_action is None else
+                {"future_action": self._actions.scale(data.future_action)}))
         if reset_num_timesteps:
             self.num_timesteps = 0
         # SB3's meaning: num_timesteps counts the transitions learned from and advances with
@@ -367,7 +381,7 @@ class PCCAgent:
 
         self.train_result = train_embedding(
             self.model,
-            (obs, action, next_obs),
+            data,
             self.preset.train,
             method=self.method,
             device=self.device,

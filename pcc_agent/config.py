@@ -267,6 +267,16 @@ class TrainConfig:
             Xeon with AMX it makes a Pendulum-size MLP step 1.6x faster; a CPU without native
             bfloat16 emulates it, slower than float32, so ``"bf16"`` warns there. A named
             variant of the training, not the paper's float32 recipe.
+        prediction_horizon: ``K``. Above 1, the loss gains ``multistep_coef`` times the
+            multi-step prediction term
+            ``sum_{k=2..K} -log D(x_{t+k} | f(...f(f(mu(x_t), u_t), u_{t+1})..., u_{t+k-1}))``
+            (:func:`pcc_agent.losses.multistep_prediction`), on data that hold ``K``
+            consecutive transitions per sample (``pcc_envs.data.collect_transitions(...,
+            prediction_horizon=K)``). Why: a rate that moves the picture by under a pixel
+            per step (CartPole-v1's cart, the arms' outer joints) changes a one-step
+            prediction too little for the code to keep it, and its effect grows with ``k``.
+            A named variant of the objective, not the paper's (1).
+        multistep_coef: Weight of each extra step of that term.
     """
 
     lr: float = 5e-4
@@ -294,11 +304,19 @@ class TrainConfig:
     kl_scale: float = 1.0
     flush_denormals: bool = True
     mixed_precision: Literal["off", "bf16", "auto"] = "off"
+    prediction_horizon: int = 1
+    multistep_coef: float = 1.0
 
     def __post_init__(self) -> None:
         """Validate the values, with messages that say how to fix them."""
         if self.batch_size < 1 or self.epochs < 1:
             raise ValueError("batch_size and epochs must be >= 1.")
+        if isinstance(self.prediction_horizon, bool) or not isinstance(
+                self.prediction_horizon, int) or self.prediction_horizon < 1:
+            raise ValueError(f"prediction_horizon must be an integer >= 1, got "
+                             f"{self.prediction_horizon!r}.")
+        if not self.multistep_coef >= 0:
+            raise ValueError(f"multistep_coef must be >= 0, got {self.multistep_coef}.")
         if self.min_epochs < 0 or self.patience < 0:
             raise ValueError(
                 f"min_epochs and patience must be >= 0, got {self.min_epochs} and "

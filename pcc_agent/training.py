@@ -35,7 +35,7 @@ from pcc_agent.checkpoint import (
 )
 from pcc_agent.config import TrainConfig, check_mixed_precision
 from pcc_agent.io import atomic_write_text, sb3_logger
-from pcc_agent.losses import METHODS, TransitionBatch, get_loss
+from pcc_agent.losses import METHODS, TransitionBatch, get_loss, multistep_prediction
 from pcc_agent.model import EmbeddingModel
 
 
@@ -47,14 +47,24 @@ class TransitionArrays:
         obs: uint8 ``(N, F, H, W)``.
         action: float32 ``(N, n_u)``.
         next_obs: uint8 ``(N, F, H, W)``.
+        future_action: float32 ``(N, K - 1, n_u)`` actions ``u_{t+1} .. u_{t+K-1}``, or None
+            (one-step data).
+        future_obs: uint8 ``(N, K - 1, F, H, W)`` observations ``x_{t+2} .. x_{t+K}``, or None.
     """
 
     obs: np.ndarray
     action: np.ndarray
     next_obs: np.ndarray
+    future_action: np.ndarray | None = None
+    future_obs: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.obs.shape[0])
+
+    @property
+    def prediction_horizon(self) -> int:
+        """``K``: the consecutive transitions each sample holds (1 for one-step data)."""
+        return 1 if self.future_action is None else 1 + int(self.future_action.shape[1])
 
 
 def dataset_arrays(data: Any) -> TransitionArrays:
@@ -62,8 +72,8 @@ def dataset_arrays(data: Any) -> TransitionArrays:
 
     Args:
         data: A ``pcc_envs.data.TransitionDataset`` (or any object with ``obs``, ``action``,
-            ``next_obs`` attributes), a mapping with those keys, or a tuple
-            ``(obs, action, next_obs)``.
+            ``next_obs`` attributes, and optionally ``future_action`` and ``future_obs``), a
+            mapping with those keys, or a tuple ``(obs, action, next_obs)``.
 
     Returns:
         The validated arrays (observations uint8, actions float32).
@@ -73,19 +83,19 @@ def dataset_arrays(data: Any) -> TransitionArrays:
     """
     if isinstance(data, TransitionArrays):
         return data
+    names = ("obs", "action", "next_obs", "future_action", "future_obs")
     if isinstance(data, Mapping):
-        fields = (data.get("obs"), data.get("action"), data.get("next_obs"))
+        fields = tuple(data.get(name) for name in names)
     elif isinstance(data, tuple | list) and len(data) == 3:
-        fields = tuple(data)
+        fields = (*data, None, None)
     else:
-        fields = (getattr(data, "obs", None), getattr(data, "action", None),
-                  getattr(data, "next_obs", None))
-    if any(f is None for f in fields):
+        fields = tuple(getattr(data, name, None) for name in names)
+    if any(f is None for f in fields[:3]):
         raise ValueError(
             "Expected transitions with obs, action and next_obs (a TransitionDataset, a dict or "
             f"an (obs, action, next_obs) tuple), got {type(data).__name__}."
         )
-    obs, action, next_obs = (np.asarray(f) for f in fields)
+    obs, action, next_obs = (np.asarray(f) for f in fields[:3])
     if obs.ndim != 4 or obs.shape != next_obs.shape:
         raise ValueError(
             f"obs and next_obs must both be (N, frames, H, W), got {obs.shape} and "
@@ -99,7 +109,21 @@ def dataset_arrays(data: Any) -> TransitionArrays:
         action = action[:, None]
     if action.ndim != 2 or action.shape[0] != obs.shape[0]:
         raise ValueError(f"action must be (N, n_u) with N={obs.shape[0]}, got {action.shape}.")
-    return TransitionArrays(obs, action.astype(np.float32, copy=False), next_obs)
+    future_action, future_obs = fields[3:]
+    if (future_action is None) != (future_obs is None):
+        raise ValueError("future_action and future_obs come together (both or neither).")
+    if future_action is not None:
+        future_action, future_obs = np.asarray(future_action), np.asarray(future_obs)
+        if (future_action.shape[:1] + future_action.shape[2:] != action.shape
+                or future_obs.shape != (len(obs), future_action.shape[1], *obs.shape[1:])
+                or future_obs.dtype != np.uint8):
+            raise ValueError(
+                f"future_action must be (N, K - 1, n_u) and future_obs uint8 (N, K - 1, frames, "
+                f"H, W) for obs {obs.shape} and action {action.shape}; got "
+                f"{future_action.shape} and {future_obs.shape} ({future_obs.dtype}).")
+        future_action = future_action.astype(np.float32, copy=False)
+    return TransitionArrays(obs, action.astype(np.float32, copy=False), next_obs,
+                            future_action, future_obs)
 
 
 def resolve_device(device: torch.device | str = "auto") -> torch.device:
@@ -317,10 +341,20 @@ class Trainer:
 
     def _loss(self, batch: TransitionBatch, config: TrainConfig,
               generator: torch.Generator) -> tuple[torch.Tensor, dict[str, float]]:
-        """The method's loss on ``batch``, under bfloat16 autocast when that is on."""
+        """The method's loss on ``batch``, under bfloat16 autocast when that is on.
+
+        With ``config.prediction_horizon`` above 1 it adds the multi-step prediction term
+        (metric ``multistep``).
+        """
         with torch.autocast(self.device.type, dtype=torch.bfloat16,
                             enabled=self.bf16_autocast):
-            return self.loss_fn(self.model, batch, config, generator)
+            loss, metrics = self.loss_fn(self.model, batch, config, generator)
+            if config.prediction_horizon > 1:
+                extra = multistep_prediction(self.model, batch, config.prediction_horizon)
+                loss = loss + config.multistep_coef * extra
+                metrics = {**metrics, "loss": float(loss.detach()),
+                           "multistep": float(extra.detach())}
+            return loss, metrics
 
     def _make_logger(self) -> Any:
         if self.log_dir is None:
@@ -336,8 +370,7 @@ class Trainer:
         return order[n_val:], order[:n_val]
 
     def _batch(self, tensors: tuple[torch.Tensor, ...], idx: torch.Tensor) -> TransitionBatch:
-        obs, action, next_obs = tensors
-        return TransitionBatch(obs[idx], action[idx], next_obs[idx])
+        return TransitionBatch(*(t[idx] for t in tensors))
 
     def _check(self, value: float, reference: float) -> None:
         if not math.isfinite(value):
@@ -451,12 +484,19 @@ class Trainer:
             )
         if resume and self.checkpoint_path is None:
             raise ValueError("resume=True needs a checkpoint_path.")
+        horizon = self.config.prediction_horizon
+        if arrays.prediction_horizon < horizon:
+            raise ValueError(
+                f"prediction_horizon {horizon} needs {horizon - 1} further steps per "
+                f"transition; the data hold {arrays.prediction_horizon - 1}. Collect them with "
+                f"pcc_envs.data.collect_transitions(..., prediction_horizon={horizon}).")
         start_time = time.perf_counter()
-        tensors = (
-            torch.from_numpy(np.ascontiguousarray(arrays.obs)).to(self.device),
-            torch.from_numpy(np.ascontiguousarray(arrays.action)).to(self.device),
-            torch.from_numpy(np.ascontiguousarray(arrays.next_obs)).to(self.device),
-        )
+        parts = [arrays.obs, arrays.action, arrays.next_obs]
+        if horizon > 1:  # only the steps the term uses
+            assert arrays.future_action is not None and arrays.future_obs is not None
+            parts += [arrays.future_action[:, :horizon - 1], arrays.future_obs[:, :horizon - 1]]
+        tensors = tuple(torch.from_numpy(np.ascontiguousarray(part)).to(self.device)
+                        for part in parts)
         train_idx, val_idx = self._split(len(arrays))
         if not resume:  # a resumed run restores the statistics with the weights
             self.model.fit_input_statistics(tensors[0][train_idx.to(self.device)])

@@ -204,7 +204,7 @@ def _patience(spec: RunSpec) -> int:
 def _model_key(spec: RunSpec) -> tuple[Any, ...]:
     """Runs with the same key train the same model at the same speed per epoch."""
     return (spec.env_id, spec.method, spec.model_variant, spec.num_samples,
-            bool(spec.flush_denormals), spec.learning_rate)
+            bool(spec.flush_denormals), spec.learning_rate, spec.prediction_horizon)
 
 
 def _cost_key(spec: RunSpec, with_method: bool = True) -> tuple[Any, ...]:
@@ -212,7 +212,7 @@ def _cost_key(spec: RunSpec, with_method: bool = True) -> tuple[Any, ...]:
     if spec.method in REFERENCE_METHODS:  # no training: the controller and env decide
         return (spec.env_id, spec.method)
     budget = (spec.env_id, spec.model_variant, spec.num_samples, spec.max_epochs, spec.patience,
-              bool(spec.flush_denormals), spec.learning_rate)
+              bool(spec.flush_denormals), spec.learning_rate, spec.prediction_horizon)
     return (*budget, spec.method) if with_method else budget
 
 

@@ -84,6 +84,10 @@ class ReproducePreset:
             committed run; see ``pcc_agent.presets.TrainConfig.flush_denormals``).
         learning_rate: Override of Adam's learning rate (None: the env preset's, the paper's
             5e-4).
+        prediction_horizon: With ``K >= 2``, train with the multi-step prediction term over
+            ``K`` steps (``pcc_agent.config.TrainConfig.prediction_horizon``; a named variant
+            of the objective, not the paper's) on data that hold ``K`` transitions per sample.
+            None: the env preset's (1).
         task_seed: Base seed of the control tasks (the same tasks for every model and method).
         model_seeds: Explicit model seeds to run (None: ``0 .. num_models - 1``).
         restarts: Trainings per model. With more than one, model ``m`` is the one of its
@@ -121,6 +125,7 @@ class ReproducePreset:
     patience: int | None = None
     flush_denormals: bool | None = None
     learning_rate: float | None = None
+    prediction_horizon: int | None = None
     task_seed: int = 2020
     model_seeds: tuple[int, ...] | None = None
     restarts: int = 1
@@ -213,7 +218,8 @@ CONTROL_SELECTION_TASKS = 10
 
 #: Preset fields that change what a run trains or evaluates (see ReproducePreset.override).
 RUN_FIELDS: tuple[str, ...] = ("num_tasks", "task_seed", "num_samples", "max_epochs", "patience",
-                               "flush_denormals", "learning_rate", "keep_best_control_every")
+                               "flush_denormals", "learning_rate", "prediction_horizon",
+                               "keep_best_control_every")
 
 
 def _tag_value(value: Any) -> str:

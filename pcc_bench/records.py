@@ -57,6 +57,7 @@ class RunSpec:
     patience: int | None = None
     flush_denormals: bool | None = None
     learning_rate: float | None = None
+    prediction_horizon: int | None = None
     validation_tasks: int | None = None
     keep_best_control_every: int | None = None
 
@@ -270,7 +271,8 @@ def preset_for(spec: RunSpec) -> Any:
     from pcc_agent.presets import get_preset
 
     preset = get_preset(spec.env_id, spec.model_variant)
-    overrides = {"epochs": spec.max_epochs, "patience": spec.patience, "lr": spec.learning_rate}
+    overrides = {"epochs": spec.max_epochs, "patience": spec.patience, "lr": spec.learning_rate,
+                 "prediction_horizon": spec.prediction_horizon}
     # Flushing is off unless the run asks for it: the library's default turned on after most
     # committed runs were made without it, and a grid's recipe must not change under them.
     preset = preset.with_training(flush_denormals=bool(spec.flush_denormals),

@@ -138,6 +138,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--learning-rate", type=positive_float, metavar="LR",
                         help="Override Adam's learning rate (runs and rows are labelled).")
     parser.add_argument(
+        "--prediction-horizon", type=positive_int, metavar="K",
+        help="Train with the multi-step prediction term over K steps (K >= 2; a named variant "
+        "of the objective, not the paper's: TrainConfig.prediction_horizon; runs and rows are "
+        "labelled).")
+    parser.add_argument(
         "--keep-best-control", type=positive_int, metavar="EPOCHS",
         help="Every EPOCHS epochs, score each training on 10 validation tasks (task seed "
         "2021, never the evaluation tasks) and keep its best-controlling weights instead of "
@@ -234,6 +239,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             changes["flush_denormals"] = True
         if args.learning_rate is not None:
             changes["learning_rate"] = args.learning_rate
+        if args.prediction_horizon is not None:
+            if args.prediction_horizon < 2:
+                raise SystemExit("--prediction-horizon must be at least 2 (1 is the paper's "
+                                 "one-step objective: leave the option out).")
+            changes["prediction_horizon"] = args.prediction_horizon
         if args.keep_best_control is not None:
             changes["keep_best_control_every"] = args.keep_best_control
         noise_stds = args.noise or [variance**0.5 for variance in args.noise_variance or ()]

@@ -90,6 +90,9 @@ def training_recipe(settings: dict[str, Any]) -> str:
         changes.append("subnormals flushed to zero")
     if "lr" in train and train["lr"] != 5e-4:  # the paper's Adam learning rate
         changes.append(f"learning rate {train['lr']:g}")
+    if train.get("prediction_horizon", 1) > 1:
+        changes.append(f"{train['prediction_horizon']}-step prediction term (weight "
+                       f"{train.get('multistep_coef', 1.0):g} per extra step)")
     recipe = "paper recipe" if not changes else "paper recipe + " + " + ".join(changes)
     if not train:
         return recipe

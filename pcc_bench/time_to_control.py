@@ -56,9 +56,12 @@ DEFAULT_MINUTES = (2.0, 5.0, 10.0, 15.0)
 DEFAULT_RESULTS_DIR = DEFAULT_RESULTS_ROOT / "time_to_control"
 
 
-def recipe_label(variant: str, lr: float | None, keep_best_control: int | None = None) -> str:
-    """The preset variant, with ``+lr=...`` and ``+keep_best_control=...`` when they are set."""
+def recipe_label(variant: str, lr: float | None, keep_best_control: int | None = None,
+                 prediction_horizon: int | None = None) -> str:
+    """The preset variant with its overrides (``+lr=``, ``+prediction_horizon=``, ...)."""
     label = variant if lr is None else f"{variant}+lr={lr:g}"
+    if prediction_horizon:
+        label += f"+prediction_horizon={prediction_horizon}"
     return label if not keep_best_control else f"{label}+keep_best_control={keep_best_control}"
 
 
@@ -73,11 +76,14 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
                        minutes: Sequence[float], max_epochs: int, patience: int,
                        num_tasks: int, task_seed: int, flush_denormals: bool,
                        lr: float | None = None,
-                       keep_best_control: int | None = None) -> dict[str, Any]:
+                       keep_best_control: int | None = None,
+                       prediction_horizon: int | None = None) -> dict[str, Any]:
     """Train one model, keep its best weights at each minute mark, evaluate each of them.
 
     Best: of the lowest validation loss, or with ``keep_best_control`` (epochs between
-    scores) of the best validation-task control score so far.
+    scores) of the best validation-task control score so far. ``prediction_horizon``: train
+    with the multi-step prediction term (``TrainConfig.prediction_horizon``; None: the
+    preset's).
     """
     import torch
 
@@ -89,7 +95,8 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
     torch.set_num_threads(1)
     preset = get_preset(env_id, variant)
     train = replace(preset.train, epochs=max_epochs, patience=patience,
-                    flush_denormals=flush_denormals, lr=preset.train.lr if lr is None else lr)
+                    flush_denormals=flush_denormals, lr=preset.train.lr if lr is None else lr,
+                    prediction_horizon=prediction_horizon or preset.train.prediction_horizon)
     preset = replace(preset, train=train)
     marks = sorted(float(m) for m in minutes)
     start = time.perf_counter()
@@ -153,7 +160,8 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
             "task_seed": task_seed, "max_epochs": max_epochs, "patience": patience,
             "flush_denormals": flush_denormals, "lr": train.lr,
             "keep_best_control_every": keep_best_control or None,
-            "recipe": recipe_label(variant, lr, keep_best_control),
+            "prediction_horizon": train.prediction_horizon,
+            "recipe": recipe_label(variant, lr, keep_best_control, prediction_horizon),
             "epochs_trained": epochs,
             "train_message": agent.train_result.message if agent.train_result else "",
             "marks": marks_out}
@@ -166,7 +174,8 @@ def run_model(job: tuple[str, str, int], settings: dict[str, Any]) -> dict[str, 
                                 settings["max_epochs"], settings["patience"],
                                 settings["num_tasks"], settings["task_seed"],
                                 settings["flush_denormals"], settings["lr"],
-                                settings["keep_best_control"])
+                                settings["keep_best_control"],
+                                settings.get("prediction_horizon"))
     record["cpu"] = cpu_name()
     return record
 
@@ -236,6 +245,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "validation tasks (task seed 2021) and keep its best-controlling "
                         "weights at each mark (the scoring counts as training time; the "
                         "recipe label says so)")
+    parser.add_argument("--prediction-horizon", type=int, default=None, metavar="K",
+                        help="train with the multi-step prediction term over K >= 2 steps "
+                        "(TrainConfig.prediction_horizon; not the paper's objective; the "
+                        "recipe label says so)")
     parser.add_argument("--max-epochs", type=int, default=1000)
     parser.add_argument("--patience", type=int, default=100)
     parser.add_argument("--num-tasks", type=int, default=10)
@@ -260,8 +273,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise SystemExit(f"--minutes must be positive, got {args.minutes}.")
     if args.keep_best_control is not None and args.keep_best_control < 1:
         raise SystemExit(f"--keep-best-control must be >= 1 epoch, got {args.keep_best_control}.")
+    if args.prediction_horizon is not None and args.prediction_horizon < 2:
+        raise SystemExit(f"--prediction-horizon must be >= 2 (1 is the paper's one-step "
+                         f"objective: leave it out), got {args.prediction_horizon}.")
     flush = not args.no_flush_denormals
-    recipe = recipe_label(args.variant, args.lr, args.keep_best_control)
+    recipe = recipe_label(args.variant, args.lr, args.keep_best_control, args.prediction_horizon)
     command = " ".join(["python -m pcc_bench.time_to_control",
                         *(argv if argv is not None else sys.argv[1:])])
     jobs = [(env, method, seed) for env in args.envs for method in args.methods
@@ -277,7 +293,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     "max_epochs": args.max_epochs, "patience": args.patience,
                     "num_tasks": args.num_tasks, "task_seed": args.task_seed,
                     "flush_denormals": flush, "lr": args.lr,
-                    "keep_best_control": args.keep_best_control}
+                    "keep_best_control": args.keep_best_control,
+                    "prediction_horizon": args.prediction_horizon}
         failed = 0
         for (env, method, seed), outcome in executor.outcomes(run_model, todo, settings):
             if isinstance(outcome, Exception):

@@ -9,12 +9,12 @@ Examples:
     python -m pcc_bench.train --env pcc/Planar-v0 --method e2c --samples 2000 --epochs 20 \
         --output planar_e2c.pt
     python -m pcc_bench.train --env pcc/Planar-v0 --keep-best-control 25
+    python -m pcc_bench.train --env pcc/CartPole-v1 --variant motion --prediction-horizon 3
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from collections.abc import Sequence
@@ -62,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="Score control on 5 validation tasks (task seed 2021) every EVERY "
                         "epochs and save the weights that score best, instead of those of the "
                         "lowest validation loss (pcc_agent.callbacks.KeepBestControl).")
+    parser.add_argument("--prediction-horizon", type=positive_int, default=None, metavar="K",
+                        help="Also train the multi-step prediction term over K >= 2 steps "
+                        "(TrainConfig.prediction_horizon; not the paper's objective).")
     parser.add_argument("--no-progress", action="store_true", help="No progress bar.")
     return parser
 
@@ -73,11 +76,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     from pcc_agent.presets import get_preset
 
     preset = get_preset(args.env, args.variant) if args.env in known_envs() else args.variant
-    if args.epochs is not None:
+    changes = {name: value for name, value in (("epochs", args.epochs),
+                                               ("prediction_horizon", args.prediction_horizon))
+               if value is not None}
+    if changes:
         if isinstance(preset, str):
-            raise SystemExit(f"--epochs needs a preset; {args.env!r} has none.")
-        preset = dataclasses.replace(preset, train=dataclasses.replace(preset.train,
-                                                                       epochs=args.epochs))
+            raise SystemExit(f"--{next(iter(changes)).replace('_', '-')} needs a preset; "
+                             f"{args.env!r} has none.")
+        if changes.get("prediction_horizon") == 1:
+            raise SystemExit("--prediction-horizon must be at least 2 (1 is the paper's "
+                             "one-step objective: leave the option out).")
+        preset = preset.with_training(**changes)
     keep = None
     if args.keep_best_control is not None:
         if isinstance(preset, str):

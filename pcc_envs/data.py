@@ -19,6 +19,12 @@ An env made with ``frame_gap = g > 1`` stacks every ``g``-th state of a chain of
 ``(F - 1) g + 1`` random steps: ``x_t = (s_0, s_g, ...)``, ``x_{t+1} = (s_1, s_{g+1}, ...)``,
 the stored state, action and next state the chain's last step, as above.
 
+With ``prediction_horizon = K > 1`` every chain goes on for ``K - 1`` more random steps, and a
+sample also holds the observations ``x_{t+2} .. x_{t+K}`` after them (``future_obs``) and
+their actions ``u_{t+1} .. u_{t+K-1}`` (``future_action``): the data of a multi-step
+prediction term (``pcc_agent.config.TrainConfig.prediction_horizon``); the random draws
+differ from those of ``K = 1``, so it is another data set.
+
 Stored actions are the normalized ``float32`` actions in ``[-1, 1]``; the dynamics were
 stepped with exactly these ``float32`` values.
 
@@ -66,6 +72,8 @@ FORMAT_VERSION = 2
 obstacles block only their cores, ``PlanarParams.collision_clearance``)."""
 
 _ARRAYS = ("obs", "action", "next_obs", "state", "next_state")
+#: Arrays only data sets with a prediction horizon above 1 hold.
+_FUTURE_ARRAYS = ("future_action", "future_obs")
 _CHUNK = 2048
 
 
@@ -87,7 +95,10 @@ class TransitionDataset:
         state: ``float64 (N, d)`` true states behind the newest frame of ``obs``.
         next_state: ``float64 (N, d)`` true states behind the newest frame of ``next_obs``.
         metadata: ``env_id``, ``env_kwargs``, ``seed``, ``noise_std``, ``num_samples``,
-            ``format_version``, ``package_version`` (JSON-serializable).
+            ``format_version``, ``package_version`` (JSON-serializable), and
+            ``prediction_horizon`` where it is above 1.
+        future_action: ``float32 (N, K - 1, A)`` actions ``u_{t+1} .. u_{t+K-1}``, or None.
+        future_obs: ``uint8 (N, K - 1, F, H, W)`` observations ``x_{t+2} .. x_{t+K}``, or None.
     """
 
     obs: np.ndarray
@@ -96,10 +107,30 @@ class TransitionDataset:
     state: np.ndarray
     next_state: np.ndarray
     metadata: dict[str, Any] = field(default_factory=dict)
+    future_action: np.ndarray | None = None
+    future_obs: np.ndarray | None = None
+
+    @property
+    def prediction_horizon(self) -> int:
+        """``K``: the transitions each sample holds (1 without future arrays)."""
+        return 1 if self.future_action is None else 1 + self.future_action.shape[1]
+
+    def _arrays(self) -> tuple[str, ...]:
+        return _ARRAYS + (() if self.future_action is None else _FUTURE_ARRAYS)
 
     def __post_init__(self) -> None:
         n = len(self.obs)
-        for name in _ARRAYS:
+        if (self.future_action is None) != (self.future_obs is None):
+            raise ValueError("future_action and future_obs come together (both or neither)")
+        if self.future_obs is not None and (
+                self.future_obs.shape[:2] != self.future_action.shape[:2]
+                or self.future_obs.shape[2:] != self.obs.shape[1:]
+                or self.future_obs.dtype != np.uint8):
+            raise ValueError(
+                f"future_obs must be uint8 (N, K - 1, *obs frame shape) matching future_action "
+                f"(N, K - 1, A); got {self.future_obs.shape} ({self.future_obs.dtype}) and "
+                f"{self.future_action.shape}")
+        for name in self._arrays():
             if len(getattr(self, name)) != n:
                 raise ValueError(
                     f"TransitionDataset arrays must have the same length; obs has {n}, "
@@ -113,7 +144,7 @@ class TransitionDataset:
 
     def subset(self, index: np.ndarray | slice) -> TransitionDataset:
         """The transitions at ``index`` (metadata gains ``subset_size``)."""
-        arrays = {name: getattr(self, name)[index] for name in _ARRAYS}
+        arrays = {name: getattr(self, name)[index] for name in self._arrays()}
         meta = {**self.metadata, "subset_size": len(arrays["obs"])}
         return TransitionDataset(**arrays, metadata=meta)
 
@@ -146,7 +177,7 @@ class TransitionDataset:
                 np.savez(
                     handle,
                     metadata=np.array(json.dumps(self.metadata, sort_keys=True)),
-                    **{name: getattr(self, name) for name in _ARRAYS},
+                    **{name: getattr(self, name) for name in self._arrays()},
                 )
             os.replace(tmp, path)
         except BaseException:
@@ -167,6 +198,7 @@ class TransitionDataset:
         try:
             with np.load(path, allow_pickle=False) as data:
                 arrays = {name: data[name] for name in _ARRAYS}
+                arrays.update({name: data[name] for name in _FUTURE_ARRAYS if name in data})
                 metadata = json.loads(str(data["metadata"]))
         except FileNotFoundError:
             raise
@@ -191,6 +223,7 @@ def collect_transitions(
     seed: int,
     noise_std: float = 0.0,
     env_kwargs: dict[str, Any] | None = None,
+    prediction_horizon: int = 1,
 ) -> TransitionDataset:
     """Sample ``num_samples`` transitions by the paper's uniform protocol (module docstring).
 
@@ -201,12 +234,14 @@ def collect_transitions(
             same arguments give identical arrays.
         noise_std: Standard deviation of the Gaussian process noise on next states.
         env_kwargs: Extra constructor arguments of the env (e.g. ``{"max_torque": 0.2}``).
+        prediction_horizon: ``K``: consecutive transitions per sample (module docstring).
 
     Returns:
         The dataset, with its metadata.
     """
     if num_samples < 0:
         raise ValueError(f"num_samples must be >= 0, got {num_samples}")
+    _check_horizon(prediction_horizon)
     rng = np.random.default_rng(seed)
     wrapped = _make_env(env_id, noise_std, env_kwargs)
     env: ImageControlEnv = wrapped.unwrapped
@@ -220,27 +255,43 @@ def collect_transitions(
         }
         arrays["next_obs"] = np.empty_like(arrays["obs"])
         arrays["next_state"] = np.empty_like(arrays["state"])
+        extra = prediction_horizon - 1
+        if extra:
+            arrays["future_action"] = np.empty((num_samples, extra, env.action_dim),
+                                               dtype=np.float32)
+            arrays["future_obs"] = np.empty((num_samples, extra, *env.observation_space.shape),
+                                            dtype=np.uint8)
         for start in range(0, num_samples, _CHUNK):
             n = min(_CHUNK, num_samples - start)
             rows = slice(start, start + n)
             states = [env.sample_states(rng, n)]
             actions = []
-            for _ in range(steps):
+            for _ in range(steps + extra):
                 action = env.sample_action(rng, n).astype(np.float32)
                 nxt = env.transition(states[-1], action.astype(np.float64))
                 states.append(env.add_process_noise(nxt, rng))
                 actions.append(action)
             images = [env.render_states(s) for s in states]
+            # The observation k steps on stacks images[k : k + steps : gap].
             stack_frames(images[:steps:gap], out=arrays["obs"][rows])
-            stack_frames(images[1::gap], out=arrays["next_obs"][rows])
-            arrays["action"][rows] = actions[-1]
-            arrays["state"][rows] = states[-2]
-            arrays["next_state"][rows] = states[-1]
+            stack_frames(images[1:steps + 1:gap], out=arrays["next_obs"][rows])
+            arrays["action"][rows] = actions[steps - 1]
+            arrays["state"][rows] = states[steps - 1]
+            arrays["next_state"][rows] = states[steps]
+            for j in range(extra):
+                arrays["future_action"][rows, j] = actions[steps + j]
+                stack_frames(images[j + 2:j + 2 + steps:gap], out=arrays["future_obs"][rows, j])
     finally:
         wrapped.close()
-    return TransitionDataset(
-        **arrays, metadata=_metadata(env_id, num_samples, seed, noise_std, env_kwargs)
-    )
+    return TransitionDataset(**arrays, metadata=_metadata(
+        env_id, num_samples, seed, noise_std, env_kwargs, prediction_horizon))
+
+
+def _check_horizon(prediction_horizon: int) -> None:
+    if isinstance(prediction_horizon, bool) or not isinstance(
+            prediction_horizon, (int, np.integer)) or prediction_horizon < 1:
+        raise ValueError(f"prediction_horizon must be an integer >= 1, got "
+                         f"{prediction_horizon!r}")
 
 
 def _metadata(
@@ -249,6 +300,7 @@ def _metadata(
     seed: int,
     noise_std: float,
     env_kwargs: dict[str, Any] | None,
+    prediction_horizon: int = 1,
 ) -> dict[str, Any]:
     meta = {
         "env_id": env_id,
@@ -262,6 +314,8 @@ def _metadata(
     registered = _registered_kwargs(env_id)
     if registered:  # only where the id has some, so that other ids keep their cached files
         meta["registered_kwargs"] = registered
+    if prediction_horizon > 1:  # likewise: one-step data keep their cached files
+        meta["prediction_horizon"] = int(prediction_horizon)
     return meta
 
 
@@ -291,14 +345,16 @@ def cache_path(
     noise_std: float = 0.0,
     env_kwargs: dict[str, Any] | None = None,
     cache_dir: str | os.PathLike[str] | None = None,
+    prediction_horizon: int = 1,
 ) -> Path:
     """The cache file of a dataset: a readable prefix plus the SHA-256 of its canonical key.
 
     The key is the canonical JSON of everything that changes the data: env id, env kwargs,
     the id's registered kwargs (where it has any), seed, the exact ``repr`` of ``noise_std``,
-    ``num_samples``, :data:`FORMAT_VERSION` and the package version.
+    ``num_samples``, the prediction horizon (where above 1), :data:`FORMAT_VERSION` and the
+    package version.
     """
-    meta = _metadata(env_id, num_samples, seed, noise_std, env_kwargs)
+    meta = _metadata(env_id, num_samples, seed, noise_std, env_kwargs, prediction_horizon)
     digest = hashlib.sha256(
         json.dumps(meta, sort_keys=True, separators=(",", ":")).encode()
     ).hexdigest()
@@ -314,14 +370,17 @@ def load_or_collect(
     noise_std: float = 0.0,
     env_kwargs: dict[str, Any] | None = None,
     cache_dir: str | os.PathLike[str] | None = None,
+    prediction_horizon: int = 1,
 ) -> TransitionDataset:
     """:func:`collect_transitions` through the on-disk cache (see :func:`cache_path`).
 
     A cached file is used only if its stored metadata equals the requested one; a mismatched
     or unreadable file is regenerated (with a warning) and replaced atomically.
     """
-    path = cache_path(env_id, num_samples, seed, noise_std, env_kwargs, cache_dir)
-    expected = _metadata(env_id, num_samples, seed, noise_std, env_kwargs)
+    _check_horizon(prediction_horizon)
+    path = cache_path(env_id, num_samples, seed, noise_std, env_kwargs, cache_dir,
+                      prediction_horizon)
+    expected = _metadata(env_id, num_samples, seed, noise_std, env_kwargs, prediction_horizon)
     if path.exists():
         try:
             data = TransitionDataset.load(path)
@@ -334,7 +393,8 @@ def load_or_collect(
                 f"Dataset cache {path} holds {data.metadata}, expected {expected}; regenerating.",
                 stacklevel=2,
             )
-    data = collect_transitions(env_id, num_samples, seed, noise_std, env_kwargs)
+    data = collect_transitions(env_id, num_samples, seed, noise_std, env_kwargs,
+                               prediction_horizon)
     data.save(path)
     return data
 

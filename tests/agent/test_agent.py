@@ -17,7 +17,8 @@ from pcc_agent import PCCAgent
 from pcc_agent.agent import sb3_logger
 from pcc_agent.checkpoint import CheckpointError
 from pcc_agent.planning.config import PlannerConfig
-from pcc_agent.presets import get_preset
+from pcc_agent.presets import default_preset_for_spaces, get_preset
+from pcc_envs.data import cache_path
 
 ENV_ID = "pcc/Planar-v0"
 
@@ -288,8 +289,6 @@ class DotEnv(gym.Env):
 
 
 def test_own_image_env_trains_plans_and_reloads(tmp_path):
-    from pcc_agent.presets import default_preset_for_spaces
-
     dots = DotEnv()
     env = gym.wrappers.TimeLimit(dots, max_episode_steps=10)
     preset = default_preset_for_spaces(env.observation_space, env.action_space)
@@ -317,9 +316,26 @@ def test_own_image_env_trains_plans_and_reloads(tmp_path):
                                                                          env=env).predict(obs)[0])
 
 
-def test_own_env_gets_the_asked_variant():
-    from pcc_agent.presets import default_preset_for_spaces
+def test_a_prediction_horizon_collects_its_further_steps_and_trains_the_term(tmp_path):
+    preset = tiny_preset(epochs=1)
+    preset = dataclasses.replace(preset, train=dataclasses.replace(preset.train,
+                                                                   prediction_horizon=2))
+    agent = PCCAgent(ENV_ID, preset=preset, seed=0, data_cache_dir=tmp_path)
+    agent.learn(total_timesteps=200)
+    assert agent.train_result.history[0]["train/multistep"] > 0
+    (cached,) = tmp_path.iterdir()
+    assert cached == cache_path(ENV_ID, 200, 0, cache_dir=tmp_path, prediction_horizon=2)
+    # Only the pcc/ envs' sampler collects the further steps.
+    env = gym.wrappers.TimeLimit(DotEnv(), max_episode_steps=10)
+    foreign = default_preset_for_spaces(env.observation_space, env.action_space)
+    foreign = dataclasses.replace(foreign, train=dataclasses.replace(foreign.train,
+                                                                     prediction_horizon=2))
+    with pytest.raises(ValueError, match="prediction_horizon 2 needs 2 consecutive "
+                       "transitions per sample, which only the pcc/ envs' sampler collects"):
+        PCCAgent(env, preset=foreign, seed=0).learn(total_timesteps=50)
 
+
+def test_own_env_gets_the_asked_variant():
     env = DotEnv(size=64)  # above 48x48: a CNN, the paper's or the CPU-friendly one
     fast = default_preset_for_spaces(env.observation_space, env.action_space, variant="fast")
     paper = default_preset_for_spaces(env.observation_space, env.action_space)

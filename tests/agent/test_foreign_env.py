@@ -89,7 +89,7 @@ def test_learn_trains_on_actions_scaled_to_the_box(monkeypatch):
     seen = {}
 
     def capture(model, data, *args, **kwargs):
-        seen["action"] = data[1]
+        seen["action"], seen["future_action"] = data.action, data.future_action
         raise KeyboardInterrupt  # stop before training
 
     monkeypatch.setattr(agent_module, "train_embedding", capture)
@@ -98,6 +98,11 @@ def test_learn_trains_on_actions_scaled_to_the_box(monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         agent.learn(dataset=(obs, actions, obs))
     np.testing.assert_allclose(seen["action"], actions / 2)
+    # The further steps of multi-step data are scaled the same way.
+    with pytest.raises(KeyboardInterrupt):
+        agent.learn(dataset={"obs": obs, "action": actions, "next_obs": obs,
+                             "future_action": actions[:, None], "future_obs": obs[:, None]})
+    np.testing.assert_allclose(seen["future_action"], actions[:, None] / 2)
     assert agent.config_dict()["action_scaling"] == "box"
 
 

@@ -18,6 +18,7 @@ from pcc_agent.losses import (
     get_loss,
     locally_linear_kl,
     model_config_for_method,
+    multistep_prediction,
 )
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ModelConfig, TrainConfig
@@ -145,3 +146,29 @@ def test_unknown_method_and_wrong_model_raise_clear_errors():
                             torch.zeros(2, 1, 8, 8, dtype=torch.uint8))
     with pytest.raises(ValueError, match="model_config_for_method"):
         get_loss("e2c")(model, batch, TrainConfig())
+
+
+@pytest.mark.parametrize("method", ["pcc", "e2c"])
+def test_multistep_prediction_rolls_the_mean_dynamics_through_the_further_steps(method):
+    model = EmbeddingModel((2, 8, 8), 2, model_config_for_method(SMALL, method), seed=0)
+    g = torch.Generator().manual_seed(7)
+
+    def images(*shape):
+        return torch.randint(0, 256, (*shape, 2, 8, 8), dtype=torch.uint8, generator=g)
+
+    batch = TransitionBatch(images(16), torch.rand(16, 2, generator=g) * 2 - 1, images(16),
+                            torch.rand(16, 3, 2, generator=g) * 2 - 1, images(16, 3))
+    z = model.transition_mean(model.encode(batch.obs)[0], batch.action)
+    expected = []
+    for j in range(3):
+        z = model.transition_mean(z, batch.future_action[:, j])
+        expected.append(-model.log_likelihood(z, batch.future_obs[:, j]).mean())
+    assert torch.allclose(multistep_prediction(model, batch, 2), expected[0])
+    assert torch.allclose(multistep_prediction(model, batch, 4), sum(expected))
+    with pytest.raises(ValueError, match="over 5 steps needs horizon >= 2 and 4 further steps"
+                       ".*the batch has 3"):
+        multistep_prediction(model, batch, 5)
+    with pytest.raises(ValueError, match="the batch has 0"):
+        multistep_prediction(model, TransitionBatch(*batch[:3]), 2)
+    with pytest.raises(ValueError, match="needs horizon >= 2"):
+        multistep_prediction(model, batch, 1)

@@ -380,3 +380,35 @@ def test_subnormal_flushing_is_on_by_default_and_off_for_configs_saved_before_it
     del saved["flush_denormals"]  # as written before the field existed
     assert TrainConfig.from_dict(saved).flush_denormals is False
     assert TrainConfig.from_dict(TrainConfig().to_dict()).flush_denormals is True
+
+
+def test_a_prediction_horizon_adds_the_multistep_term_and_needs_its_data():
+    from pcc_envs.data import collect_transitions
+
+    data = collect_transitions("pcc/Planar-v0", 96, seed=0, prediction_horizon=3)
+    config = dataclasses.replace(TRAIN, prediction_horizon=3, multistep_coef=0.5, epochs=1)
+    model = EmbeddingModel((1, 40, 40), 2, CONFIG, seed=0)
+    trainer = training.Trainer(model, config, device="cpu", progress_bar=False)
+    batch = trainer._batch(tuple(torch.from_numpy(a) for a in (
+        data.obs, data.action, data.next_obs, data.future_action, data.future_obs)),
+        torch.arange(8))
+    loss, metrics = trainer._loss(batch, config, torch.Generator().manual_seed(0))
+    one_step, _ = trainer._loss(batch, dataclasses.replace(config, prediction_horizon=1),
+                                torch.Generator().manual_seed(0))
+    assert metrics["multistep"] > 0
+    assert loss.item() == pytest.approx(one_step.item() + 0.5 * metrics["multistep"], rel=1e-5)
+    assert metrics["loss"] == pytest.approx(loss.item())
+    result = trainer.fit(data)
+    assert result.epochs == 1 and result.history[0]["train/multistep"] > 0
+    # Horizon 2 trains on the same data with its first further step only.
+    two = dataclasses.replace(config, prediction_horizon=2)
+    assert train_embedding(EmbeddingModel((1, 40, 40), 2, CONFIG, seed=0), data, two,
+                           device="cpu", progress_bar=False).epochs == 1
+    with pytest.raises(ValueError, match="prediction_horizon 3 needs 2 further steps per "
+                       "transition; the data hold 0"):
+        train_embedding(model, (data.obs, data.action, data.next_obs), config, device="cpu",
+                        progress_bar=False)
+    with pytest.raises(ValueError, match="prediction_horizon must be an integer >= 1"):
+        TrainConfig(prediction_horizon=0)
+    with pytest.raises(ValueError, match="multistep_coef must be >= 0"):
+        TrainConfig(multistep_coef=-1.0)

@@ -391,6 +391,11 @@ def test_training_overrides_reach_the_trained_model(tmp_path):
     assert (train["patience"], train["epochs"], train["flush_denormals"]) == (7, 2, True)
     assert "subnormals flushed to zero" in training_recipe(record["config"])
     assert record["spec"]["patience"] == 7
+    multistep = dataclasses.replace(tiny_spec(seed=1), max_epochs=1, prediction_horizon=2)
+    trained = execute_run(multistep, tmp_path, str(tmp_path / "data"))
+    assert trained["config"]["train"]["prediction_horizon"] == 2
+    assert "2-step prediction term (weight 1 per extra step)" in training_recipe(
+        trained["config"])
     # A record from before the option counts as trained without it, never as this run.
     assert load_finished_run(tmp_path / spec.relative_path, spec) is not None
     unflushed = dataclasses.replace(spec, flush_denormals=None)
@@ -615,6 +620,9 @@ def test_overrides_that_change_the_runs_rename_the_preset():
     flushed = paper.override(flush_denormals=True)
     assert flushed.name == "paper+flush_denormals=True"
     assert {r.flush_denormals for r in expand_grid(flushed, include_oracle=False)} == {True}
+    multistep = paper.override(prediction_horizon=3)
+    assert multistep.name == "paper+prediction_horizon=3"
+    assert {r.prediction_horizon for r in expand_grid(multistep, include_oracle=False)} == {3}
     # Table 3 runs Planar at noise variance 1 and 2, the other domains at variance 1.
     noisy = REPRODUCE_PRESETS["paper-noisy"]
     levels = {(r.env_id, r.noise_std) for r in expand_grid(noisy, include_oracle=False)}
@@ -723,6 +731,7 @@ def test_summary_keeps_older_planner_rows_apart_with_their_own_oracle(tmp_path):
      (["--noise-variance", "-2"], "must be >= 0, got -2"),
      (["--noise", "1", "--noise-variance", "2"], "not allowed with argument --noise"),
      (["--seeds", "3", "1000"], "--seeds must be below 1000"),
+     (["--prediction-horizon", "1"], "--prediction-horizon must be at least 2"),
      (["--ray-gpus-per-task", "-1"], "must be >= 0")],
 )
 def test_bad_command_line_is_refused_before_any_run(tmp_path, capsys, args, message):

@@ -183,3 +183,41 @@ def test_observations_for_states_matches_the_env():
     batch = observations_for_states(env, states)
     for s, obs in zip(states, batch):
         np.testing.assert_array_equal(obs, env.unwrapped.observation_of(s))
+
+
+@pytest.mark.parametrize("env_id", ["pcc/CartPole-v1", "pcc/Planar-v0"])
+def test_a_prediction_horizon_adds_the_chains_further_steps(env_id):
+    data = collect_transitions(env_id, 30, seed=0, prediction_horizon=3)
+    env = gym.make(env_id).unwrapped
+    assert data.prediction_horizon == 3 and data.metadata["prediction_horizon"] == 3
+    assert data.future_action.shape == (30, 2, env.action_dim)
+    assert data.future_obs.shape == (30, 2, *data.obs.shape[1:])
+    # Each further observation's newest frame shows the true transition of the state before.
+    state = data.next_state
+    for j in range(2):
+        state = env.transition(state, data.future_action[:, j])
+        np.testing.assert_array_equal(data.future_obs[:, j, -1], env.render_states(state))
+    if env.num_frames == 2:
+        np.testing.assert_array_equal(data.future_obs[:, 0, 0], data.next_obs[:, 1])
+    one_step = collect_transitions(env_id, 30, seed=0)
+    assert one_step.future_obs is None and one_step.prediction_horizon == 1
+    assert "prediction_horizon" not in one_step.metadata
+
+
+def test_multistep_data_keep_their_further_steps_in_the_cache_and_subsets(tmp_path):
+    data = load_or_collect("pcc/Planar-v0", 32, seed=0, cache_dir=tmp_path, prediction_horizon=2)
+    (path,) = tmp_path.iterdir()
+    assert path == cache_path("pcc/Planar-v0", 32, 0, cache_dir=tmp_path, prediction_horizon=2)
+    assert path != cache_path("pcc/Planar-v0", 32, 0, cache_dir=tmp_path)
+    again = TransitionDataset.load(path)
+    np.testing.assert_array_equal(again.future_obs, data.future_obs)
+    np.testing.assert_array_equal(again.future_action, data.future_action)
+    assert data.subset(np.arange(5)).future_obs.shape == (5, 1, 1, 40, 40)
+    with pytest.raises(ValueError, match="prediction_horizon must be an integer >= 1, got 0"):
+        collect_transitions("pcc/Planar-v0", 4, seed=0, prediction_horizon=0)
+    with pytest.raises(ValueError, match="both or neither"):
+        TransitionDataset(data.obs, data.action, data.next_obs, data.state, data.next_state,
+                          future_action=data.future_action)
+    with pytest.raises(ValueError, match="future_obs must be uint8"):
+        TransitionDataset(data.obs, data.action, data.next_obs, data.state, data.next_state,
+                          future_action=data.future_action, future_obs=data.future_obs[:, :, 0])

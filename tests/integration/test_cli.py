@@ -73,6 +73,19 @@ def test_train_keeps_the_weights_that_control_best(tmp_path, capsys):
     assert "kept " in out and (tmp_path / "planar.pt").exists()
 
 
+def test_train_with_a_prediction_horizon(tmp_path, capsys):
+    args = ["train", "--env", "pcc/Planar-v0", "--samples", "100", "--epochs", "1",
+            "--output", str(tmp_path / "planar.pt"), "--data-dir", str(tmp_path / "data"),
+            "--no-progress"]
+    assert cli.main([*args, "--prediction-horizon", "2"]) == 0
+    from pcc_agent.agent import PCCAgent
+
+    agent = PCCAgent.load(tmp_path / "planar.pt")
+    assert agent.preset.train.prediction_horizon == 2
+    with pytest.raises(SystemExit, match="--prediction-horizon must be at least 2"):
+        cli.main([*args, "--prediction-horizon", "1"])
+
+
 def test_evaluate_refuses_a_missing_model(tmp_path):
     with pytest.raises(SystemExit, match="No saved agent"):
         cli.main(["evaluate", str(tmp_path / "none.pt")])
