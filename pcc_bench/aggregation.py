@@ -277,5 +277,6 @@ def _is_training_of(spec: dict[str, Any], preset: ReproducePreset) -> bool:
         and spec.get("flush_denormals") == preset.flush_denormals
         and spec.get("learning_rate") == preset.learning_rate
         and spec.get("prediction_horizon") == preset.prediction_horizon
+        and spec.get("plan_length") == preset.plan_length
         and spec.get("num_samples") == preset.num_samples.get(spec.get("env_id", ""))
     )

@@ -88,6 +88,9 @@ class ReproducePreset:
             ``K`` steps (``pcc_agent.config.TrainConfig.prediction_horizon``; a named variant
             of the objective, not the paper's) on data that hold ``K`` transitions per sample.
             None: the env preset's (1).
+        plan_length: Override of the learned agents' planning horizon T (None: the env
+            preset's, chosen for one-step models; the oracle keeps its own). A recipe whose
+            models predict further may plan further; choose it on validation tasks.
         task_seed: Base seed of the control tasks (the same tasks for every model and method).
         model_seeds: Explicit model seeds to run (None: ``0 .. num_models - 1``).
         restarts: Trainings per model. With more than one, model ``m`` is the one of its
@@ -126,6 +129,7 @@ class ReproducePreset:
     flush_denormals: bool | None = None
     learning_rate: float | None = None
     prediction_horizon: int | None = None
+    plan_length: int | None = None
     task_seed: int = 2020
     model_seeds: tuple[int, ...] | None = None
     restarts: int = 1
@@ -219,7 +223,7 @@ CONTROL_SELECTION_TASKS = 10
 #: Preset fields that change what a run trains or evaluates (see ReproducePreset.override).
 RUN_FIELDS: tuple[str, ...] = ("num_tasks", "task_seed", "num_samples", "max_epochs", "patience",
                                "flush_denormals", "learning_rate", "prediction_horizon",
-                               "keep_best_control_every")
+                               "plan_length", "keep_best_control_every")
 
 
 def _tag_value(value: Any) -> str:

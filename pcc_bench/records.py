@@ -58,6 +58,7 @@ class RunSpec:
     flush_denormals: bool | None = None
     learning_rate: float | None = None
     prediction_horizon: int | None = None
+    plan_length: int | None = None
     validation_tasks: int | None = None
     keep_best_control_every: int | None = None
 
@@ -279,6 +280,8 @@ def preset_for(spec: RunSpec) -> Any:
                                   **{k: v for k, v in overrides.items() if v is not None})
     if spec.num_samples is not None:
         preset = replace(preset, data=replace(preset.data, num_samples=spec.num_samples))
+    if spec.plan_length is not None:
+        preset = replace(preset, planner=replace(preset.planner, plan_length=spec.plan_length))
     return replace(preset, data=replace(preset.data, noise_std=spec.noise_std))
 
 

@@ -143,6 +143,10 @@ def build_parser() -> argparse.ArgumentParser:
         "of the objective, not the paper's: TrainConfig.prediction_horizon; runs and rows are "
         "labelled).")
     parser.add_argument(
+        "--plan-length", type=positive_int, metavar="T",
+        help="The learned agents plan T steps ahead instead of the env's setting (the oracle "
+        "keeps its own; runs and rows are labelled). Choose it on validation tasks.")
+    parser.add_argument(
         "--keep-best-control", type=positive_int, metavar="EPOCHS",
         help="Every EPOCHS epochs, score each training on 10 validation tasks (task seed "
         "2021, never the evaluation tasks) and keep its best-controlling weights instead of "
@@ -244,6 +248,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise SystemExit("--prediction-horizon must be at least 2 (1 is the paper's "
                                  "one-step objective: leave the option out).")
             changes["prediction_horizon"] = args.prediction_horizon
+        if args.plan_length is not None:
+            changes["plan_length"] = args.plan_length
         if args.keep_best_control is not None:
             changes["keep_best_control_every"] = args.keep_best_control
         noise_stds = args.noise or [variance**0.5 for variance in args.noise_variance or ()]

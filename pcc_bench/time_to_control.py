@@ -57,11 +57,13 @@ DEFAULT_RESULTS_DIR = DEFAULT_RESULTS_ROOT / "time_to_control"
 
 
 def recipe_label(variant: str, lr: float | None, keep_best_control: int | None = None,
-                 prediction_horizon: int | None = None) -> str:
+                 prediction_horizon: int | None = None, plan_length: int | None = None) -> str:
     """The preset variant with its overrides (``+lr=``, ``+prediction_horizon=``, ...)."""
     label = variant if lr is None else f"{variant}+lr={lr:g}"
     if prediction_horizon:
         label += f"+prediction_horizon={prediction_horizon}"
+    if plan_length:
+        label += f"+plan_length={plan_length}"
     return label if not keep_best_control else f"{label}+keep_best_control={keep_best_control}"
 
 
@@ -77,13 +79,14 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
                        num_tasks: int, task_seed: int, flush_denormals: bool,
                        lr: float | None = None,
                        keep_best_control: int | None = None,
-                       prediction_horizon: int | None = None) -> dict[str, Any]:
+                       prediction_horizon: int | None = None,
+                       plan_length: int | None = None) -> dict[str, Any]:
     """Train one model, keep its best weights at each minute mark, evaluate each of them.
 
     Best: of the lowest validation loss, or with ``keep_best_control`` (epochs between
     scores) of the best validation-task control score so far. ``prediction_horizon``: train
     with the multi-step prediction term (``TrainConfig.prediction_horizon``; None: the
-    preset's).
+    preset's); ``plan_length``: the agent's planning horizon (None: the env's).
     """
     import torch
 
@@ -97,7 +100,9 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
     train = replace(preset.train, epochs=max_epochs, patience=patience,
                     flush_denormals=flush_denormals, lr=preset.train.lr if lr is None else lr,
                     prediction_horizon=prediction_horizon or preset.train.prediction_horizon)
-    preset = replace(preset, train=train)
+    planner = preset.planner if plan_length is None else replace(preset.planner,
+                                                                 plan_length=plan_length)
+    preset = replace(preset, train=train, planner=planner)
     marks = sorted(float(m) for m in minutes)
     start = time.perf_counter()
     agent = PCCAgent(env_id, method=method, preset=preset, seed=seed, device="cpu")
@@ -161,7 +166,9 @@ def train_and_evaluate(env_id: str, method: str, variant: str, seed: int,
             "flush_denormals": flush_denormals, "lr": train.lr,
             "keep_best_control_every": keep_best_control or None,
             "prediction_horizon": train.prediction_horizon,
-            "recipe": recipe_label(variant, lr, keep_best_control, prediction_horizon),
+            "plan_length": planner.plan_length,
+            "recipe": recipe_label(variant, lr, keep_best_control, prediction_horizon,
+                                   plan_length),
             "epochs_trained": epochs,
             "train_message": agent.train_result.message if agent.train_result else "",
             "marks": marks_out}
@@ -175,7 +182,7 @@ def run_model(job: tuple[str, str, int], settings: dict[str, Any]) -> dict[str, 
                                 settings["num_tasks"], settings["task_seed"],
                                 settings["flush_denormals"], settings["lr"],
                                 settings["keep_best_control"],
-                                settings.get("prediction_horizon"))
+                                settings.get("prediction_horizon"), settings.get("plan_length"))
     record["cpu"] = cpu_name()
     return record
 
@@ -249,6 +256,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="train with the multi-step prediction term over K >= 2 steps "
                         "(TrainConfig.prediction_horizon; not the paper's objective; the "
                         "recipe label says so)")
+    parser.add_argument("--plan-length", type=int, default=None, metavar="T",
+                        help="the agent plans T steps ahead instead of the env's setting "
+                        "(the recipe label says so)")
     parser.add_argument("--max-epochs", type=int, default=1000)
     parser.add_argument("--patience", type=int, default=100)
     parser.add_argument("--num-tasks", type=int, default=10)
@@ -276,8 +286,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.prediction_horizon is not None and args.prediction_horizon < 2:
         raise SystemExit(f"--prediction-horizon must be >= 2 (1 is the paper's one-step "
                          f"objective: leave it out), got {args.prediction_horizon}.")
+    if args.plan_length is not None and args.plan_length < 1:
+        raise SystemExit(f"--plan-length must be >= 1, got {args.plan_length}.")
     flush = not args.no_flush_denormals
-    recipe = recipe_label(args.variant, args.lr, args.keep_best_control, args.prediction_horizon)
+    recipe = recipe_label(args.variant, args.lr, args.keep_best_control, args.prediction_horizon,
+                          args.plan_length)
     command = " ".join(["python -m pcc_bench.time_to_control",
                         *(argv if argv is not None else sys.argv[1:])])
     jobs = [(env, method, seed) for env in args.envs for method in args.methods
@@ -294,7 +307,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     "num_tasks": args.num_tasks, "task_seed": args.task_seed,
                     "flush_denormals": flush, "lr": args.lr,
                     "keep_best_control": args.keep_best_control,
-                    "prediction_horizon": args.prediction_horizon}
+                    "prediction_horizon": args.prediction_horizon,
+                    "plan_length": args.plan_length}
         failed = 0
         for (env, method, seed), outcome in executor.outcomes(run_model, todo, settings):
             if isinstance(outcome, Exception):

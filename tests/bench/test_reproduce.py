@@ -391,9 +391,11 @@ def test_training_overrides_reach_the_trained_model(tmp_path):
     assert (train["patience"], train["epochs"], train["flush_denormals"]) == (7, 2, True)
     assert "subnormals flushed to zero" in training_recipe(record["config"])
     assert record["spec"]["patience"] == 7
-    multistep = dataclasses.replace(tiny_spec(seed=1), max_epochs=1, prediction_horizon=2)
+    multistep = dataclasses.replace(tiny_spec(seed=1), max_epochs=1, prediction_horizon=2,
+                                    plan_length=3)
     trained = execute_run(multistep, tmp_path, str(tmp_path / "data"))
     assert trained["config"]["train"]["prediction_horizon"] == 2
+    assert trained["config"]["planner"]["plan_length"] == 3
     assert "2-step prediction term (weight 1 per extra step)" in training_recipe(
         trained["config"])
     # A record from before the option counts as trained without it, never as this run.
@@ -620,9 +622,14 @@ def test_overrides_that_change_the_runs_rename_the_preset():
     flushed = paper.override(flush_denormals=True)
     assert flushed.name == "paper+flush_denormals=True"
     assert {r.flush_denormals for r in expand_grid(flushed, include_oracle=False)} == {True}
-    multistep = paper.override(prediction_horizon=3)
-    assert multistep.name == "paper+prediction_horizon=3"
-    assert {r.prediction_horizon for r in expand_grid(multistep, include_oracle=False)} == {3}
+    multistep = paper.override(prediction_horizon=3, plan_length=50)
+    assert multistep.name == "paper+prediction_horizon=3,plan_length=50"
+    runs = expand_grid(multistep.replace(envs=("pcc/CartPole-v1",)))
+    assert {(r.prediction_horizon, r.plan_length) for r in runs
+            if r.method not in ("oracle", "no-action")} == {(3, 50)}
+    # The oracle keeps its own horizon: its runs are the preset's.
+    assert {(r.prediction_horizon, r.plan_length) for r in runs
+            if r.method in ("oracle", "no-action")} == {(None, None)}
     # Table 3 runs Planar at noise variance 1 and 2, the other domains at variance 1.
     noisy = REPRODUCE_PRESETS["paper-noisy"]
     levels = {(r.env_id, r.noise_std) for r in expand_grid(noisy, include_oracle=False)}

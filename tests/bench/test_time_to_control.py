@@ -66,13 +66,17 @@ def test_recipe_label_names_control_selection():
     assert ttc.recipe_label("fast", 1.5e-3, None) == "fast+lr=0.0015"
     assert (ttc.recipe_label("motion", None, 5, prediction_horizon=3)
             == "motion+prediction_horizon=3+keep_best_control=5")
+    assert (ttc.recipe_label("motion", None, None, 3, plan_length=50)
+            == "motion+prediction_horizon=3+plan_length=50")
 
 
 def test_a_prediction_horizon_trains_the_multistep_term_under_its_own_label(tmp_path):
-    assert ttc.main(_tiny_run(tmp_path, "--minutes", "1e-6", "--prediction-horizon", "2")) == 0
+    assert ttc.main(_tiny_run(tmp_path, "--minutes", "1e-6", "--prediction-horizon", "2",
+                              "--plan-length", "7")) == 0
     (path,) = tmp_path.glob("Planar-v0/*.json")
-    assert path.name == "pcc_fast+prediction_horizon=2_tasks2020_seed0.json"
-    assert json.loads(path.read_text())["prediction_horizon"] == 2
+    assert path.name == "pcc_fast+prediction_horizon=2+plan_length=7_tasks2020_seed0.json"
+    record = json.loads(path.read_text())
+    assert (record["prediction_horizon"], record["plan_length"]) == (2, 7)
     with pytest.raises(SystemExit, match="--prediction-horizon must be >= 2"):
         ttc.main(_tiny_run(tmp_path, "--prediction-horizon", "1"))
 
