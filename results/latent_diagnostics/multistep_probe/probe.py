@@ -46,6 +46,9 @@ p.add_argument("--goal-fraction", type=float, default=0.0,
 p.add_argument("--goal-angle", type=float, default=np.pi / 4)
 p.add_argument("--goal-rate", type=float, default=np.pi)
 p.add_argument("--samples", type=int, default=None, help="chains (default: the preset's data size)")
+p.add_argument("--plan-lengths", type=int, nargs="*", default=[],
+               help="also score the validation tasks with these plan lengths")
+p.add_argument("--save", default=None, help="save the agent here at every scoring (_ep<E>.pt)")
 p.add_argument("--out", required=True)
 a = p.parse_args()
 torch.set_num_threads(1)
@@ -126,11 +129,19 @@ def score(epoch: int, train_loss: float, extra: float) -> None:
     agent.set_goal(env.goal_observation())
     agent.set_planner()
     validation = evaluate_on_validation_tasks(agent, a.env, a.tasks).mean
+    by_length = {}
+    for length in a.plan_lengths:
+        agent.set_planner(plan_length=length)
+        by_length[f"validation_T{length}"] = evaluate_on_validation_tasks(agent, a.env,
+                                                                          a.tasks).mean
+    agent.set_planner(get_preset(a.env, a.variant).planner)
+    if a.save:
+        agent.save(f"{a.save}_ep{epoch}.pt")
     model.train()
     log.append({"epoch": epoch, "minutes": round((time.time() - t0) / 60, 1),
                 "train_loss": round(train_loss, 2), "val_loss": round(val, 2),
                 "multistep_nll": round(extra, 2), "r2": np.round(r2, 3).tolist(),
-                "validation": validation})
+                "validation": validation, **by_length})
     print(log[-1], flush=True)
     with open(a.out, "w") as f:
         json.dump({"args": vars(a), "model": dataclasses.asdict(preset.model),
