@@ -138,8 +138,7 @@ def _diagnose_run(
             for start in distinct], weights=counts))
     near_goal = (goal_prediction(agent.model, env)
                  if getattr(env.unwrapped, "supports_oracle", False) else None)
-    hold = evaluate_goal_hold(agent, env_id, env_kwargs={"noise_std": spec.noise_std}
-                              if spec.noise_std else None).mean_steps
+    hold = evaluate_goal_hold(agent, env_id, env_kwargs=spec.env_kwargs).mean_steps
     print(f"{spec.method} seed {spec.seed}: {record['mean']:.1f}% in goal, consistency "
           f"error {found.consistency_error:.4f}, curvature {found.curvature:.2e}, state "
           f"R^2 {np.round(state_r2, 2).tolist()}, at the goal: drift {at_goal.drift:.3f}, "

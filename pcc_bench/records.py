@@ -63,6 +63,11 @@ class RunSpec:
     keep_best_control_every: int | None = None
 
     @property
+    def env_kwargs(self) -> dict[str, Any]:
+        """The ``gym.make`` arguments of the run's env: its process noise, where there is any."""
+        return {"noise_std": self.noise_std} if self.noise_std else {}
+
+    @property
     def relative_path(self) -> Path:
         """Where the run's JSON lives below the results directory."""
         env = self.env_id.replace("/", "_")

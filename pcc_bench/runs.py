@@ -54,7 +54,7 @@ def execute_run(spec: RunSpec, results_dir: str | Path, data_dir: str | None = N
     from pcc_agent.evaluation import evaluate_control, task_seeds
     from pcc_agent.planning import PLANNER_REVISION
 
-    env_kwargs = {"noise_std": spec.noise_std} if spec.noise_std else {}
+    env_kwargs = spec.env_kwargs
     seeds = task_seeds(spec.task_seed, spec.num_tasks)
     trained = record_to_reevaluate(Path(results_dir), spec)
     if trained is not None:

@@ -111,7 +111,7 @@ def export_run(path: Path, results_dir: Path) -> str:
     from pcc_agent.agent import PCCAgent
 
     agent, entry = save_half_weights(PCCAgent.load(source), results_dir, spec)
-    env_kwargs = {"noise_std": spec.noise_std} if spec.noise_std else {}
+    env_kwargs = spec.env_kwargs
     evaluation = evaluate_control(agent, spec.env_id, record["task_seeds"], env_kwargs)
     record = dict(record)
     record["percentages_float32"] = record["percentages"]
