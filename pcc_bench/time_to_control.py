@@ -230,7 +230,8 @@ def plot(rows: Sequence[dict[str, Any]], path: Path) -> None:
         ax.set_ylabel("% of steps in goal")
         ax.set_ylim(0, 100)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        # Below the panel: recipe labels are long and would cover the curves or the next panel.
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
     fig.tight_layout()
     atomic_save_figure(fig, path, dpi=110)
     plt.close(fig)
