@@ -154,7 +154,7 @@ def _sample_posteriors(
     n = x_t.shape[0]
     images = to_float_image(torch.cat([x_t, x_next], dim=0))  # converted once, reused below
     x_t, x_next = images[:n], images[n:]
-    mean_all, logvar_all = model.encode(images)
+    mean_all, logvar_all = model.encode_pair(x_t, x_next)
     mu_t, mu_n = mean_all[:n], mean_all[n:]
     lv_t, lv_n = logvar_all[:n], logvar_all[n:]
     z_hat_next = gaussian_rsample(mu_n, lv_n, generator)
@@ -357,7 +357,7 @@ def e2c_loss(
     x_t, u, x_next = batch.obs, batch.action, batch.next_obs
     n = x_t.shape[0]
     images = to_float_image(torch.cat([x_t, x_next], dim=0))
-    mean_all, logvar_all = model.encode(images)
+    mean_all, logvar_all = model.encode_pair(images[:n], images[n:])
     mu_t, mu_n = mean_all[:n], mean_all[n:]
     lv_t, lv_n = logvar_all[:n], logvar_all[n:]
     z_t = gaussian_rsample(mu_t, lv_t, generator)

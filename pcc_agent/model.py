@@ -75,6 +75,16 @@ class EmbeddingModel(nn.Module):
         """Mean and log-variance of E(z | x) for a batch of observations ``(B, F, H, W)``."""
         return self.encoder(obs)
 
+    def encode_pair(
+        self, obs: torch.Tensor, next_obs: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``encode(torch.cat([obs, next_obs]))`` for transitions ``(B, F, H, W)`` each.
+
+        Per-frame encoders embed the frames that ``next_obs`` shares with ``obs`` once (see
+        :meth:`pcc_agent.networks.GaussianEncoder.forward_pair`); the result is the same.
+        """
+        return self.encoder.forward_pair(obs, next_obs)
+
     def transition(self, z: torch.Tensor, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean and log-variance of F(z' | z, u)."""
         out = self.dynamics(z, u)

@@ -133,13 +133,21 @@ class _PerFrameMotion(nn.Module):
         """``(N, 1, H, W)`` single frames -> ``(N, D)`` features."""
         raise NotImplementedError
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """``(B, F, H, W)`` float images -> ``(B, D F)`` features."""
+    def frame_features(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, F, H, W)`` float images -> ``(B, F, D)`` features of each frame alone."""
         batch, frames, height, width = x.shape
         features = self.per_frame(x.reshape(batch * frames, 1, height, width))
-        features = features.reshape(batch, frames, -1)
+        return features.reshape(batch, frames, -1)
+
+    @staticmethod
+    def combine(features: torch.Tensor) -> torch.Tensor:
+        """``(B, F, D)`` per-frame features -> ``(B, D F)``: the newest and the motions."""
         motion = (features[:, 1:] - features[:, :-1]) * MOTION_SCALE
         return torch.cat([features[:, -1], motion.flatten(1)], dim=1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, F, H, W)`` float images -> ``(B, D F)`` features."""
+        return self.combine(self.frame_features(x))
 
 
 class _Keypoints(_PerFrameMotion):
@@ -227,8 +235,35 @@ class GaussianEncoder(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Return the mean and log-variance of E(z | obs)."""
-        mean, logvar = self.head(self.backbone(obs)).chunk(2, dim=-1)
+        return self._gaussian(self.backbone(obs))
+
+    def _gaussian(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        mean, logvar = self.head(features).chunk(2, dim=-1)
         return mean, logvar.clamp(self.min_logvar, self.max_logvar)
+
+    def forward_pair(
+        self, obs: torch.Tensor, next_obs: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``forward(torch.cat([obs, next_obs]))``, each shared frame embedded once.
+
+        In a transition of stacked frames ``next_obs`` usually repeats all frames of ``obs``
+        but the oldest. An encoder that embeds every frame alone (``"keypoints"``,
+        ``"frame_cnn"``, without input standardization, whose statistics differ per frame
+        position) then needs ``F + 1`` frame embeddings per transition instead of ``2F``: a
+        quarter of its work saved for two frames. Any other input takes the plain path.
+        """
+        trunk, hidden = self.backbone
+        image_input, per_frame = trunk[0], trunk[1]
+        if (isinstance(per_frame, _PerFrameMotion) and not image_input.standardize
+                and obs.shape[1] > 1 and obs.shape == next_obs.shape
+                and torch.equal(obs[:, 1:], next_obs[:, :-1])):
+            chain = torch.cat([obs, next_obs[:, -1:]], dim=1)
+            features = per_frame.frame_features(image_input(chain))
+            frames = obs.shape[1]
+            both = torch.cat([per_frame.combine(features[:, :frames]),
+                              per_frame.combine(features[:, 1:])])
+            return self._gaussian(hidden(both))
+        return self(torch.cat([obs, next_obs]))
 
 
 class BernoulliDecoder(nn.Module):
@@ -285,11 +320,15 @@ class BernoulliDecoder(nn.Module):
             per_frame = per_frame.repeat_interleave(self.output_upsample**2)
         self.convs[-1].bias.copy_(per_frame)
 
+    def _low_resolution(self, z: torch.Tensor) -> torch.Tensor:
+        """The CNN decoder's logits before the output upsampling or pixel shuffle."""
+        return self.convs(self.fc(z).view(z.shape[0], *self.grid))
+
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         """Return the Bernoulli logits of D(x | z), shaped ``(B, F, H, W)``."""
         if self.kind == "mlp":
             return self.net(z).view(z.shape[0], *self.obs_shape)
-        x = self.convs(self.fc(z).view(z.shape[0], *self.grid))
+        x = self._low_resolution(z)
         if self.pixel_shuffle:
             x = F.pixel_shuffle(x, self.output_upsample)
         elif self.output_upsample > 1:
@@ -299,18 +338,22 @@ class BernoulliDecoder(nn.Module):
     def log_likelihood(self, z: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """``log D(target | z)`` summed per sample, ``(B,)``; ``target`` float in [0, 1].
 
-        When the logits are a nearest-neighbour upsampling by k of a low-resolution map, each
-        low-resolution logit l covers k*k pixels and ``sum_i BCE(l, t_i) = k^2 BCE(l,
-        mean_i t_i)``, so the likelihood is computed exactly at low resolution against the
-        average-pooled target (k^2 times cheaper, no upsampling in the graph).
+        Two exact shortcuts for a CNN decoder whose low-resolution map covers the image by a
+        factor k (no cropping). Nearest-neighbour upsampling: each low-resolution logit l
+        covers k*k pixels and ``sum_i BCE(l, t_i) = k^2 BCE(l, mean_i t_i)``, so the
+        likelihood is computed at low resolution against the average-pooled target (k^2
+        times cheaper). Pixel shuffle: it only moves logits, so they are compared before it
+        with the target rearranged by the inverse shuffle (the same sum, without shuffling
+        the logits and their gradients).
         """
-        k = self.output_upsample if self.kind == "cnn" and not self.pixel_shuffle else 1
+        k = self.output_upsample if self.kind == "cnn" else 1
         _, height, width = self.obs_shape
         if k > 1 and height % k == 0 and width % k == 0:
-            low = self.convs(self.fc(z).view(z.shape[0], *self.grid))
+            low = self._low_resolution(z)
             if low.shape[-2:] == (height // k, width // k):
-                pooled = F.avg_pool2d(target, k)
-                return (k * k) * bernoulli_log_likelihood(low, pooled)
+                if self.pixel_shuffle:
+                    return bernoulli_log_likelihood(low, F.pixel_unshuffle(target, k))
+                return (k * k) * bernoulli_log_likelihood(low, F.avg_pool2d(target, k))
         return bernoulli_log_likelihood(self(z), target)
 
 

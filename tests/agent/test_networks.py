@@ -162,7 +162,8 @@ def _pixel_shuffle_config(last_channels: int = 2 * 16) -> ModelConfig:
 
 def test_pixel_shuffle_decoder_gives_every_pixel_its_own_logit():
     """Nearest upsampling repeats one logit over each 4x4 block; the pixel shuffle does not,
-    and its likelihood is the plain full-resolution one."""
+    and its likelihood (computed before the shuffle, against the unshuffled target) is the
+    plain full-resolution one."""
     from pcc_agent.distributions import bernoulli_log_likelihood
 
     shape = OBS_SHAPES["pcc/CartPole-v0"]
@@ -244,6 +245,36 @@ def test_per_frame_encoders_are_a_model_config_choice(kind):
         dataclasses.replace(config, encoder_motion_gain=5.0)
     with pytest.raises(ValueError, match="encoder_kind must be 'mlp', 'cnn', 'keypoints' or"):
         dataclasses.replace(config, encoder_kind="resnet")
+
+
+@pytest.mark.parametrize("variant", ["motion", "fast"])
+def test_encode_pair_embeds_shared_frames_once_with_the_same_result(variant, monkeypatch):
+    """A transition's next observation repeats the newer frame: per-frame encoders embed the
+    three frames once (3 embeddings per transition, not 4); the codes are the same."""
+    shape = OBS_SHAPES["pcc/CartPole-v0"]
+    model = EmbeddingModel(shape, 1, get_preset("pcc/CartPole-v0", variant).model, seed=0)
+    g = torch.Generator().manual_seed(0)
+    chain = torch.randint(0, 256, (3, 3, *shape[1:]), dtype=torch.uint8, generator=g)
+    obs, next_obs = chain[:, :2], chain[:, 1:]
+    embedded: list[int] = []
+    per_frame = model.encoder.backbone[0][1]
+    if variant == "motion":
+        original = per_frame.per_frame
+        monkeypatch.setattr(per_frame, "per_frame",
+                            lambda frames: embedded.append(len(frames)) or original(frames))
+    with torch.no_grad():
+        expected = model.encode(torch.cat([obs, next_obs]))
+        embedded.clear()
+        pair = model.encode_pair(obs, next_obs)
+        assert embedded == ([3 * 3] if variant == "motion" else [])
+        for got, want in zip(pair, expected):
+            torch.testing.assert_close(got, want, rtol=1e-6, atol=1e-6)
+        unrelated = torch.randint(0, 256, (3, *shape), dtype=torch.uint8, generator=g)
+        embedded.clear()
+        pair = model.encode_pair(obs, unrelated)  # nothing shared: the plain path
+        assert embedded == ([2 * 3 * 2] if variant == "motion" else [])
+        for got, want in zip(pair, model.encode(torch.cat([obs, unrelated]))):
+            torch.testing.assert_close(got, want)
 
 
 def test_motion_gain_shows_the_encoder_the_change_between_frames():
