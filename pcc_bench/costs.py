@@ -11,9 +11,13 @@ best source there is:
    size, flushing, learning rate) with another epoch cap or patience: their seconds per epoch
    times the epochs the run is expected to train, which is the epochs those runs stopped at
    where that holds for the run's cap and patience, else the cap.
-3. ``other methods``: finished runs of other methods of the same kind (their mean time).
-4. ``epoch cap``: the seconds per epoch of ``train_speed.json`` (committed results, one
-   thread) or a conservative guess per sample, times the epoch cap.
+3. ``one-step model``: for a run with the multi-step prediction term, finished runs of the
+   same model trained without it: their seconds per epoch times
+   :func:`multistep_cost_factor`, times the epoch cap.
+4. ``other methods``: finished runs of other methods of the same kind (their mean time).
+5. ``epoch cap``: the seconds per epoch of ``train_speed.json`` (committed results, one
+   thread) or a conservative guess per sample, times the epoch cap (and the multi-step
+   factor).
 
 A run that resumes a training checkpoint (``pcc reproduce`` keeps one every few epochs) is
 charged only for the epochs it has left to its cap, at the checkpoint's own seconds per epoch
@@ -35,7 +39,7 @@ import json
 import os
 from collections import Counter
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +56,8 @@ BASIS_TEXT = {
     "same kind": "the mean time of finished runs of the same kind",
     "same model": "finished runs of the same model with another epoch cap or patience (their "
                   "seconds per epoch times the epochs they trained)",
+    "one-step model": "finished runs of the same model without the multi-step term (their "
+                      "seconds per epoch times the term's cost factor, to the epoch cap)",
     "other methods": "the mean time of finished runs of other methods of the same kind",
     "epoch cap": "the epoch cap at train_speed.json's seconds per epoch or a guess (no "
                  "finished run of their kind)",
@@ -71,7 +77,7 @@ class CostEstimate:
         expected_seconds: Sum of the runs' expected durations (seconds of one core each).
         upper_seconds: The same if every model trains to its epoch cap.
         runs_from_records: How many runs took their figure from finished runs (sources
-            ``same kind``, ``same model``, ``other methods``).
+            ``same kind``, ``same model``, ``one-step model``, ``other methods``).
         run_seconds: Expected duration of each run, in the order of the runs given.
         run_upper_seconds: Upper duration of each run.
         bases: Source of each run's figure (a key of :data:`BASIS_TEXT`), with
@@ -216,6 +222,19 @@ def _cost_key(spec: RunSpec, with_method: bool = True) -> tuple[Any, ...]:
     return (*budget, spec.method) if with_method else budget
 
 
+#: Extra cost of each further step of the multi-step prediction term, as a share of a one-step
+#: epoch (one more latent step and one more decoder pass with its likelihood per transition).
+#: Measured: CartPole-v1 ``motion`` 21.9 s per one-step epoch against about 44 with K = 5
+#: (x 2.0); 2-link 50.7 against 89.4 with K = 3 (x 1.8). 0.3 errs on the long side.
+MULTISTEP_COST_PER_STEP = 0.3
+
+
+def multistep_cost_factor(prediction_horizon: int | None) -> float:
+    """How many one-step epochs an epoch with the ``K``-step prediction term costs."""
+    steps = max(int(prediction_horizon or 1), 1)
+    return 1.0 + MULTISTEP_COST_PER_STEP * (steps - 1)
+
+
 def _cap_seconds(spec: RunSpec, measured: dict[tuple[str, str, str], float]) -> float:
     """Seconds for one run that trains to its epoch cap, without finished runs to go by."""
     from pcc_agent.presets import get_preset
@@ -224,10 +243,11 @@ def _cap_seconds(spec: RunSpec, measured: dict[tuple[str, str, str], float]) -> 
         return 300.0 if spec.method == ORACLE else 30.0
     preset = get_preset(spec.env_id, spec.model_variant)
     samples = spec.num_samples or preset.data.num_samples
-    cnn = preset.model.encoder_kind == "cnn"
+    cnn = preset.model.encoder_kind != "mlp"
     guess = 0.1 if cnn and spec.model_variant == "paper" else (2e-3 if cnn else 7e-4)
     per_sample = measured.get((spec.env_id, spec.method, spec.model_variant), guess)
-    return per_sample * samples * _epoch_cap(spec)
+    return per_sample * samples * _epoch_cap(spec) * multistep_cost_factor(
+        spec.prediction_horizon)
 
 
 #: Records of this machine that suffice on their own (early stopping varies from run to run).
@@ -320,6 +340,9 @@ def estimate_cost(
         same_kind = by_kind.get(_cost_key(spec))
         same_model = None if reference else by_model.get(_model_key(spec))
         other_methods = None if reference else by_kind.get(_cost_key(spec, with_method=False))
+        multistep = not reference and (spec.prediction_horizon or 1) > 1
+        one_step = (by_model.get(_model_key(replace(spec, prediction_horizon=None)))
+                    if multistep else None)
         if same_kind:
             # A reference run varies little: one run of it on this machine is enough.
             used, where = _prefer_this_machine(same_kind, 1 if reference else MIN_THIS_MACHINE)
@@ -341,6 +364,15 @@ def estimate_cost(
                                      for t in used]))
             run_expected = speed * _expected_epochs(spec, used) + control
             run_upper = max(t.seconds_per_epoch() or 0.0 for t in used) * cap + control
+        elif one_step and any(t.epochs for t in one_step):
+            used, where = _prefer_this_machine([t for t in one_step if t.epochs])
+            basis = "one-step model"
+            factor = multistep_cost_factor(spec.prediction_horizon)
+            control = float(np.mean([t.eval_seconds * spec.num_tasks / max(t.spec.num_tasks, 1)
+                                     for t in used]))
+            run_expected = factor * float(np.mean([t.seconds_per_epoch() for t in used])) * cap
+            run_expected += control
+            run_upper = factor * max(t.seconds_per_epoch() or 0.0 for t in used) * cap + control
         elif other_methods:
             used, where = _prefer_this_machine(other_methods)
             basis = "other methods"
@@ -368,7 +400,8 @@ def estimate_cost(
         sources.update(t.source for t in used if t.source)
     return CostEstimate(
         float(sum(expected)), float(sum(upper)),
-        sum(b.split(", ")[0] in ("same kind", "same model", "other methods") for b in bases),
+        sum(b.split(", ")[0] in ("same kind", "same model", "one-step model", "other methods")
+            for b in bases),
         tuple(expected), tuple(upper), tuple(bases), tuple(sorted(sources)),
     )
 

@@ -15,9 +15,11 @@ import pytest
 from pcc_agent.planning import PLANNER_REVISION
 from pcc_bench.aggregation import aggregate, interquartile_mean
 from pcc_bench.costs import (
+    MULTISTEP_COST_PER_STEP,
     CheckpointedTraining,
     checkpointed_trainings,
     estimate_cost,
+    multistep_cost_factor,
     reevaluations,
 )
 from pcc_bench.records import RunSpec, load_finished_run, training_progress
@@ -933,6 +935,23 @@ def test_cost_estimate_prefers_this_machine_and_scales_epochs_for_another_cap():
     shorter = dataclasses.replace(spec, max_epochs=100)
     assert estimate_cost([shorter], finished, machine=here).run_seconds[0] == (
         pytest.approx(speed * 100 + 2.0))
+
+
+def test_cost_estimate_of_a_multistep_run_scales_the_one_step_models_epochs():
+    here = {"cpu": "Fast CPU", "cpu_count": 2}
+    one_step = dataclasses.replace(tiny_spec(0), max_epochs=30, num_tasks=10)
+    finished = [_timed_record(one_step, 30 * 20.0, 30, here) for _ in range(3)]
+    five_step = dataclasses.replace(one_step, prediction_horizon=5)
+    cost = estimate_cost([five_step], finished, machine=here)
+    assert cost.bases == ("one-step model, this machine",)
+    assert cost.runs_from_records == 1
+    factor = multistep_cost_factor(5)
+    assert factor == pytest.approx(1 + 4 * MULTISTEP_COST_PER_STEP) and factor > 1
+    assert multistep_cost_factor(None) == multistep_cost_factor(1) == 1.0
+    assert cost.run_seconds[0] == pytest.approx(factor * 20.0 * 30 + 2.0)
+    # Without any record the guess per epoch is scaled by the same factor.
+    assert estimate_cost([five_step]).run_seconds[0] == pytest.approx(
+        factor * estimate_cost([one_step]).run_seconds[0])
 
 
 def test_status_of_the_quick_preset_comes_from_its_committed_runs(tmp_path, capsys):
