@@ -7,6 +7,9 @@ preset's batch size, without validation, checkpoints or logging. Data are real (
 synthetic (a square moved by the action, rendered at the preset's observation shape: speed
 does not depend on image content).
 
+``--prediction-horizon K`` times training with the multi-step prediction term over ``K`` steps
+(data hold ``K`` consecutive transitions; rows carry ``prediction_horizon``).
+
 ``--converge`` instead trains PCC on Planar with the paper's settings (validation split, early
 stopping) and reports the epochs and wall time until early stopping.
 
@@ -18,6 +21,7 @@ than idle cores make timings collapse, so ``--threads 1`` is the robust setting 
 Usage:
     python -m pcc_bench.train_speed                                  # Planar PCC, paper size
     python -m pcc_bench.train_speed --envs all --variants fast --max-samples 2000
+    python -m pcc_bench.train_speed --envs pcc/CartPole-v1 --variants motion --prediction-horizon 5
     python -m pcc_bench.train_speed --converge --real-data --max-epochs 300
 """
 
@@ -48,23 +52,29 @@ DEFAULT_OUTPUT = COMMITTED_RESULTS_DIR / "train_speed.json"
 PLANAR = "pcc/Planar-v0"
 
 
-def synthetic_data(env_id: str, num_samples: int, seed: int) -> TransitionArrays:
+def synthetic_data(env_id: str, num_samples: int, seed: int,
+                   prediction_horizon: int = 1) -> TransitionArrays:
     """Planar-like transitions: a bright square moved by the action (2-D, extra dims ignored).
 
     Every frame of an observation shows the square at successive positions (oldest first), so
-    multi-frame presets see a velocity too. Good enough for timing and for a convergence run
-    when the real environments are not importable.
+    multi-frame presets see a velocity too. With ``prediction_horizon`` K above 1, each sample
+    holds K consecutive transitions (each further action moves the square on). Good enough
+    for timing and for a convergence run when the real environments are not importable.
     """
     rng = np.random.default_rng(seed)
     frames, height, width = OBS_SHAPES[env_id]
     half = max(1, height // 20)
-    action = rng.uniform(-1, 1, (num_samples, ACTION_DIMS[env_id])).astype(np.float32)
-    step = np.zeros((num_samples, 2))
-    step[:, : min(2, action.shape[1])] = 2 * half * action[:, :2]
+    action = rng.uniform(-1, 1, (num_samples, ACTION_DIMS[env_id]))
     low, high = half, np.array([height, width]) - half - 1
     pos = rng.uniform(low, high, (num_samples, 2))
-    # positions of the frames of x_t (oldest first) and then of the next frame
-    track = [np.clip(pos - step * (frames - 1 - k), low, high) for k in range(frames + 1)]
+    further = rng.uniform(-1, 1, (num_samples, prediction_horizon - 1, ACTION_DIMS[env_id]))
+    actions = np.concatenate([action[:, None], further], axis=1).astype(np.float32)
+    steps = np.zeros((num_samples, prediction_horizon, 2))
+    steps[:, :, : min(2, actions.shape[2])] = 2 * half * actions[:, :, :2]
+    # positions of the frames of x_t (oldest first), then one frame per action
+    track = [np.clip(pos - steps[:, 0] * (frames - 1 - k), low, high) for k in range(frames)]
+    for k in range(prediction_horizon):
+        track.append(np.clip(track[-1] + steps[:, k], low, high))
     rows = np.arange(height)[None, :, None]
     cols = np.arange(width)[None, None, :]
 
@@ -75,12 +85,19 @@ def synthetic_data(env_id: str, num_samples: int, seed: int) -> TransitionArrays
         return (255 * inside).astype(np.uint8)
 
     images = [render(t) for t in track]
-    obs = np.stack(images[:frames], axis=1)
-    next_obs = np.stack(images[1:], axis=1)
-    return TransitionArrays(obs, action, next_obs)
+
+    def observation(first: int) -> np.ndarray:
+        return np.stack(images[first:first + frames], axis=1)
+
+    if prediction_horizon == 1:
+        return TransitionArrays(observation(0), actions[:, 0], observation(1))
+    future_obs = np.stack([observation(k) for k in range(2, prediction_horizon + 1)], axis=1)
+    return TransitionArrays(observation(0), actions[:, 0], observation(1),
+                            np.ascontiguousarray(actions[:, 1:]), future_obs)
 
 
-def load_data(env_id: str, num_samples: int, seed: int, real: bool) -> tuple[Any, str]:
+def load_data(env_id: str, num_samples: int, seed: int, real: bool,
+              prediction_horizon: int = 1) -> tuple[Any, str]:
     """Real data through pcc_envs when requested and available, else synthetic."""
     if real:
         try:
@@ -88,19 +105,21 @@ def load_data(env_id: str, num_samples: int, seed: int, real: bool) -> tuple[Any
         except ImportError as error:
             print(f"pcc_envs.data unavailable ({error}); using synthetic data")
         else:
-            return load_or_collect(env_id, num_samples, seed), "real"
-    return synthetic_data(env_id, num_samples, seed), "synthetic"
+            return load_or_collect(env_id, num_samples, seed,
+                                   prediction_horizon=prediction_horizon), "real"
+    return synthetic_data(env_id, num_samples, seed, prediction_horizon), "synthetic"
 
 
 def measure(env_id: str, variant: str, method: str, args: argparse.Namespace) -> dict[str, Any]:
     """Time ``args.epochs`` epochs after one warm-up epoch."""
     preset = get_preset(env_id, variant)
     num_samples = min(preset.data.num_samples, args.max_samples or preset.data.num_samples)
-    data, source = load_data(env_id, num_samples, args.seed, args.real_data)
+    horizon = args.prediction_horizon
+    data, source = load_data(env_id, num_samples, args.seed, args.real_data, horizon)
     config = model_config_for_method(preset.model, method)
     model = EmbeddingModel(OBS_SHAPES[env_id], ACTION_DIMS[env_id], config, seed=args.seed)
     train = dataclasses.replace(preset.train, epochs=args.epochs + 1, validation_fraction=0.0,
-                                patience=0, seed=args.seed)
+                                patience=0, seed=args.seed, prediction_horizon=horizon)
     result = train_embedding(model, data, train, method=method, device=args.device,
                              progress_bar=False)
     if result.diverged:
@@ -113,7 +132,7 @@ def measure(env_id: str, variant: str, method: str, args: argparse.Namespace) ->
         "samples_per_second": round(num_samples / seconds, 1),
         "device": str(resolve_device(args.device)), "threads": torch.get_num_threads(),
         "num_samples": num_samples, "batch_size": train.batch_size,
-        "timed_epochs": len(times), "data": source,
+        "timed_epochs": len(times), "data": source, "prediction_horizon": horizon,
         "parameters": sum(p.numel() for p in model.parameters()),
     }
 
@@ -155,6 +174,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser.add_argument("--threads", type=int, default=0, help="torch threads (0 = default)")
     parser.add_argument("--device", default="cpu", help="cpu, cuda or auto")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--prediction-horizon", type=int, default=1, metavar="K",
+                        help="train with the multi-step prediction term over K steps (1: the "
+                             "paper's one-step objective)")
     parser.add_argument("--real-data", action="store_true", help="use pcc_envs.data")
     parser.add_argument("--converge", action="store_true",
                         help="train Planar PCC to early stopping instead")
@@ -164,8 +186,10 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
     parser.add_argument("--append", action="store_true",
                         help="merge into the output file (rows with the same env, method, "
-                             "variant, mode and threads are replaced)")
+                             "variant, mode, threads and prediction horizon are replaced)")
     args = parser.parse_args(argv)
+    if args.prediction_horizon < 1:
+        parser.error(f"--prediction-horizon must be at least 1, got {args.prediction_horizon}")
     if args.threads > 0:
         torch.set_num_threads(args.threads)
     envs = list(PRESETS) if args.envs == ["all"] else args.envs
@@ -189,7 +213,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     if args.append and args.output.exists():
         def key(row: dict[str, Any]) -> tuple:
             return (row["env"], row["method"], row["variant"], row.get("mode", "epoch"),
-                    row["threads"])
+                    row["threads"], row.get("prediction_horizon", 1))
 
         new_keys = {key(row) for row in rows}
         old = [row for row in json.loads(args.output.read_text()) if key(row) not in new_keys]
