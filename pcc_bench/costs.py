@@ -12,8 +12,8 @@ best source there is:
    times the epochs the run is expected to train, which is the epochs those runs stopped at
    where that holds for the run's cap and patience, else the cap.
 3. ``one-step model``: for a run with the multi-step prediction term, finished runs of the
-   same model trained without it: their seconds per epoch times
-   :func:`multistep_cost_factor`, times the epoch cap.
+   same model trained without it, as in 2, their seconds per epoch times
+   :func:`multistep_cost_factor`.
 4. ``other methods``: finished runs of other methods of the same kind (their mean time).
 5. ``epoch cap``: the seconds per epoch of ``train_speed.json`` (committed results, one
    thread) or a conservative guess per sample, times the epoch cap (and the multi-step
@@ -57,7 +57,8 @@ BASIS_TEXT = {
     "same model": "finished runs of the same model with another epoch cap or patience (their "
                   "seconds per epoch times the epochs they trained)",
     "one-step model": "finished runs of the same model without the multi-step term (their "
-                      "seconds per epoch times the term's cost factor, to the epoch cap)",
+                      "seconds per epoch times the term's cost factor and the epochs they "
+                      "trained)",
     "other methods": "the mean time of finished runs of other methods of the same kind",
     "epoch cap": "the epoch cap at train_speed.json's seconds per epoch or a guess (no "
                  "finished run of their kind)",
@@ -359,22 +360,18 @@ def estimate_cost(
             else:
                 run_upper = max(max(speeds) * cap + max(evals) if speeds else guess,
                                 max(seconds))
-        elif same_model and any(t.epochs for t in same_model):
-            used, where = _prefer_this_machine([t for t in same_model if t.epochs])
-            basis = "same model"
-            speed = float(np.mean([t.seconds_per_epoch() for t in used]))
+        elif (same_model and any(t.epochs for t in same_model)) or (
+                one_step and any(t.epochs for t in one_step)):
+            # The same model's epochs; a multi-step run's from its one-step model, scaled.
+            exact = bool(same_model and any(t.epochs for t in same_model))
+            timed_model = same_model if exact else one_step
+            used, where = _prefer_this_machine([t for t in timed_model or () if t.epochs])
+            basis = "same model" if exact else "one-step model"
+            factor = 1.0 if exact else multistep_cost_factor(spec.prediction_horizon)
+            speed = factor * float(np.mean([t.seconds_per_epoch() for t in used]))
             control = float(np.mean([t.eval_seconds * spec.num_tasks / max(t.spec.num_tasks, 1)
                                      for t in used]))
             run_expected = speed * _expected_epochs(spec, used) + control
-            run_upper = max(t.seconds_per_epoch() or 0.0 for t in used) * cap + control
-        elif one_step and any(t.epochs for t in one_step):
-            used, where = _prefer_this_machine([t for t in one_step if t.epochs])
-            basis = "one-step model"
-            factor = multistep_cost_factor(spec.prediction_horizon)
-            control = float(np.mean([t.eval_seconds * spec.num_tasks / max(t.spec.num_tasks, 1)
-                                     for t in used]))
-            run_expected = factor * float(np.mean([t.seconds_per_epoch() for t in used])) * cap
-            run_expected += control
             run_upper = factor * max(t.seconds_per_epoch() or 0.0 for t in used) * cap + control
         elif other_methods:
             used, where = _prefer_this_machine(other_methods)
