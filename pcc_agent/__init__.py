@@ -6,7 +6,7 @@ submodule (e.g. :mod:`pcc_agent.planning`) stays light.
 
 from typing import Any
 
-__version__ = "0.3.1"
+__version__ = "0.3.2"
 
 __all__ = ["PCCAgent", "__version__", "load_pretrained"]
 

@@ -262,11 +262,12 @@ def pcc_loss(
         + config.vae_coef * vae
         + config.deterministic_ce_coef * deterministic
     )
+    loss, multistep = _with_multistep(loss, model, batch, config, mu_t, det_next)
     return loss, _metrics(
         loss=loss, prediction=prediction, consistency=consistency_term,
         curvature=curvature_term, vae=vae, deterministic=deterministic,
         reconstruction=reconstruction, kl_backward=kl_backward, entropy=entropy,
-        transition_nll=transition_nll,
+        transition_nll=transition_nll, **multistep,
     )
 
 
@@ -380,8 +381,9 @@ def e2c_loss(
     vae = reconstruction + beta * kl_prior
     loss = (reconstruction + prediction + beta * (kl_prior + config.e2c_lambda * kl_transition)
             + config.vae_coef * vae)
+    loss, multistep = _with_multistep(loss, model, batch, config, mu_t)
     return loss, _metrics(loss=loss, reconstruction=reconstruction, prediction=prediction,
-                          kl_prior=kl_prior, kl_transition=kl_transition)
+                          kl_prior=kl_prior, kl_transition=kl_transition, **multistep)
 
 
 def rce_loss(
@@ -425,13 +427,14 @@ def rce_loss(
     beta = config.kl_scale
     vae = -log_lik[n:].mean() + beta * gaussian_kl_standard(mu_t, lv_t).mean()
     loss = reconstruction + beta * (kl_backward - entropy + transition_nll) + config.vae_coef * vae
+    loss, multistep = _with_multistep(loss, model, batch, config, mu_t)
     return loss, _metrics(loss=loss, elbo=elbo, reconstruction=reconstruction,
                           kl_backward=kl_backward, entropy=entropy,
-                          transition_nll=transition_nll, vae=vae)
+                          transition_nll=transition_nll, vae=vae, **multistep)
 
 
-def multistep_prediction(model: EmbeddingModel, batch: TransitionBatch,
-                         horizon: int) -> torch.Tensor:
+def multistep_prediction(model: EmbeddingModel, batch: TransitionBatch, horizon: int,
+                         first_prediction: torch.Tensor | None = None) -> torch.Tensor:
     """The multi-step prediction term of ``TrainConfig.prediction_horizon`` (not the paper's).
 
     ``sum_{k=2..K} -log D(x_{t+k} | z_k)`` with ``z_1 = f(mu(x_t), u_t)`` and
@@ -445,6 +448,9 @@ def multistep_prediction(model: EmbeddingModel, batch: TransitionBatch,
         batch: Transitions with ``future_action`` and ``future_obs`` of at least
             ``horizon - 1`` steps.
         horizon: ``K >= 2``.
+        first_prediction: ``z_1 = f(mu(x_t), u_t)`` where the caller has computed it already
+            (every loss of the registry has ``mu(x_t)``; PCC's ``L_det`` has ``z_1``): it saves
+            encoding ``x_t`` a second time. None: computed here.
 
     Returns:
         The term (a scalar tensor), summed over the extra steps, averaged over the batch.
@@ -458,13 +464,32 @@ def multistep_prediction(model: EmbeddingModel, batch: TransitionBatch,
         raise ValueError(f"A multi-step prediction over {horizon} steps needs horizon >= 2 and "
                          f"{horizon - 1} further steps per transition; the batch has {steps}.")
     assert batch.future_action is not None and batch.future_obs is not None
-    mu, _ = model.encode(batch.obs)
-    z = model.transition_mean(mu, batch.action)
-    total = torch.zeros((), dtype=mu.dtype, device=mu.device)
+    if first_prediction is None:
+        first_prediction = model.transition_mean(model.encode(batch.obs)[0], batch.action)
+    z = first_prediction
+    total = torch.zeros((), dtype=z.dtype, device=z.device)
     for j in range(horizon - 1):
         z = model.transition_mean(z, batch.future_action[:, j])
         total = total - model.log_likelihood(z, batch.future_obs[:, j]).mean()
     return total
+
+
+def _with_multistep(
+    loss: torch.Tensor, model: EmbeddingModel, batch: TransitionBatch, config: TrainConfig,
+    obs_mean: torch.Tensor, first_prediction: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """``loss`` plus ``config.multistep_coef`` times the multi-step term, and that term by name.
+
+    With ``config.prediction_horizon`` 1 (the paper's objective): ``loss`` unchanged and no
+    term. The caller's ``obs_mean = mu(x_t)`` (or its ``first_prediction``) is reused, so the
+    term costs no encoder pass.
+    """
+    if config.prediction_horizon <= 1:
+        return loss, {}
+    if first_prediction is None:
+        first_prediction = model.transition_mean(obs_mean, batch.action)
+    term = multistep_prediction(model, batch, config.prediction_horizon, first_prediction)
+    return loss + config.multistep_coef * term, {"multistep": term}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -35,7 +35,7 @@ from pcc_agent.checkpoint import (
 )
 from pcc_agent.config import TrainConfig, check_mixed_precision
 from pcc_agent.io import atomic_write_text, sb3_logger
-from pcc_agent.losses import METHODS, TransitionBatch, get_loss, multistep_prediction
+from pcc_agent.losses import METHODS, TransitionBatch, get_loss
 from pcc_agent.model import EmbeddingModel
 
 
@@ -343,18 +343,12 @@ class Trainer:
               generator: torch.Generator) -> tuple[torch.Tensor, dict[str, float]]:
         """The method's loss on ``batch``, under bfloat16 autocast when that is on.
 
-        With ``config.prediction_horizon`` above 1 it adds the multi-step prediction term
-        (metric ``multistep``).
+        With ``config.prediction_horizon`` above 1 the loss holds the multi-step prediction
+        term (metric ``multistep``; :func:`pcc_agent.losses.multistep_prediction`).
         """
         with torch.autocast(self.device.type, dtype=torch.bfloat16,
                             enabled=self.bf16_autocast):
-            loss, metrics = self.loss_fn(self.model, batch, config, generator)
-            if config.prediction_horizon > 1:
-                extra = multistep_prediction(self.model, batch, config.prediction_horizon)
-                loss = loss + config.multistep_coef * extra
-                metrics = {**metrics, "loss": float(loss.detach()),
-                           "multistep": float(extra.detach())}
-            return loss, metrics
+            return self.loss_fn(self.model, batch, config, generator)
 
     def _make_logger(self) -> Any:
         if self.log_dir is None:

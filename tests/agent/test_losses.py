@@ -172,3 +172,27 @@ def test_multistep_prediction_rolls_the_mean_dynamics_through_the_further_steps(
         multistep_prediction(model, TransitionBatch(*batch[:3]), 2)
     with pytest.raises(ValueError, match="needs horizon >= 2"):
         multistep_prediction(model, batch, 1)
+
+
+@pytest.mark.parametrize("method", ["pcc", "e2c", "rce", "pcc-no-curvature"])
+def test_every_loss_adds_the_multistep_term_of_its_config_from_its_own_encoding(method):
+    # The losses reuse their mu(x_t) (PCC: its f(mu(x_t), u_t)) for the multi-step term; the
+    # term must equal the one computed from a fresh encoding.
+    model = EmbeddingModel((2, 8, 8), 2, model_config_for_method(SMALL, method), seed=0)
+    g = torch.Generator().manual_seed(3)
+
+    def images(*shape):
+        return torch.randint(0, 256, (*shape, 2, 8, 8), dtype=torch.uint8, generator=g)
+
+    batch = TransitionBatch(images(16), torch.rand(16, 2, generator=g) * 2 - 1, images(16),
+                            torch.rand(16, 2, 2, generator=g) * 2 - 1, images(16, 2))
+    config = TrainConfig(prediction_horizon=3, multistep_coef=0.5)
+    loss, metrics = get_loss(method)(model, batch, config, torch.Generator().manual_seed(0))
+    one_step, one_step_metrics = get_loss(method)(
+        model, batch, TrainConfig(prediction_horizon=1), torch.Generator().manual_seed(0))
+    term = multistep_prediction(model, batch, 3)
+    assert "multistep" not in one_step_metrics
+    assert metrics["multistep"] == pytest.approx(term.item(), rel=1e-5)
+    assert loss.item() == pytest.approx(one_step.item() + 0.5 * term.item(), rel=1e-5)
+    assert metrics["loss"] == pytest.approx(loss.item())
+    loss.backward()  # the term's gradient flows through the reused code
