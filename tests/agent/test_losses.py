@@ -195,4 +195,6 @@ def test_every_loss_adds_the_multistep_term_of_its_config_from_its_own_encoding(
     assert metrics["multistep"] == pytest.approx(term.item(), rel=1e-5)
     assert loss.item() == pytest.approx(one_step.item() + 0.5 * term.item(), rel=1e-5)
     assert metrics["loss"] == pytest.approx(loss.item())
-    loss.backward()  # the term's gradient flows through the reused code
+    # The term's gradient reaches the encoder through the reused code.
+    (loss - one_step).backward()
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.encoder.parameters())
