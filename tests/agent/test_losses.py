@@ -148,16 +148,23 @@ def test_unknown_method_and_wrong_model_raise_clear_errors():
         get_loss("e2c")(model, batch, TrainConfig())
 
 
-@pytest.mark.parametrize("method", ["pcc", "e2c"])
-def test_multistep_prediction_rolls_the_mean_dynamics_through_the_further_steps(method):
+def _model_and_chains(method: str, further_steps: int, seed: int):
+    """A small model of ``method`` and 16 random 8x8 transitions with ``further_steps`` more."""
     model = EmbeddingModel((2, 8, 8), 2, model_config_for_method(SMALL, method), seed=0)
-    g = torch.Generator().manual_seed(7)
+    g = torch.Generator().manual_seed(seed)
 
     def images(*shape):
         return torch.randint(0, 256, (*shape, 2, 8, 8), dtype=torch.uint8, generator=g)
 
     batch = TransitionBatch(images(16), torch.rand(16, 2, generator=g) * 2 - 1, images(16),
-                            torch.rand(16, 3, 2, generator=g) * 2 - 1, images(16, 3))
+                            torch.rand(16, further_steps, 2, generator=g) * 2 - 1,
+                            images(16, further_steps))
+    return model, batch
+
+
+@pytest.mark.parametrize("method", ["pcc", "e2c"])
+def test_multistep_prediction_rolls_the_mean_dynamics_through_the_further_steps(method):
+    model, batch = _model_and_chains(method, 3, seed=7)
     z = model.transition_mean(model.encode(batch.obs)[0], batch.action)
     expected = []
     for j in range(3):
@@ -178,14 +185,7 @@ def test_multistep_prediction_rolls_the_mean_dynamics_through_the_further_steps(
 def test_every_loss_adds_the_multistep_term_of_its_config_from_its_own_encoding(method):
     # The losses reuse their mu(x_t) (PCC: its f(mu(x_t), u_t)) for the multi-step term; the
     # term must equal the one computed from a fresh encoding.
-    model = EmbeddingModel((2, 8, 8), 2, model_config_for_method(SMALL, method), seed=0)
-    g = torch.Generator().manual_seed(3)
-
-    def images(*shape):
-        return torch.randint(0, 256, (*shape, 2, 8, 8), dtype=torch.uint8, generator=g)
-
-    batch = TransitionBatch(images(16), torch.rand(16, 2, generator=g) * 2 - 1, images(16),
-                            torch.rand(16, 2, 2, generator=g) * 2 - 1, images(16, 2))
+    model, batch = _model_and_chains(method, 2, seed=3)
     config = TrainConfig(prediction_horizon=3, multistep_coef=0.5)
     loss, metrics = get_loss(method)(model, batch, config, torch.Generator().manual_seed(0))
     one_step, one_step_metrics = get_loss(method)(
