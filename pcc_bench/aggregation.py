@@ -221,22 +221,53 @@ def kept_trainings(
     copied with ``selection``: the rule and every training's seed, validation and evaluation
     mean. A cell with a training that has no validation score, or with no more trainings
     than spares, keeps every training. Records of other presets pass unchanged.
+
+    A preset with spares and a ``candidates_preset`` chooses among that preset's runs
+    (filed under ``runs_preset``, or ``runs_preset + "+..."`` with overrides): those records
+    pass unchanged, for their own rows (but for the spares, seeds ``num_models`` onwards,
+    which that preset's rows never had), and the kept ones are added again as copies filed
+    under the choosing preset (``name``, or ``name + "+..."``), for the cells of its envs
+    where at least one spare has run.
     """
-    pools = {preset.name: preset for preset in presets if preset.spare_trainings}
-    by_cell: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    spare_presets = [preset for preset in presets if preset.spare_trainings]
+    replaced: dict[int, dict[str, Any] | None] = {}
+    own_pools = {p.name: p for p in spare_presets if p.candidates_preset is None}
+    by_cell: dict[tuple[Any, ...], tuple[ReproducePreset, list[dict[str, Any]]]] = {}
+
+    def pool(label: str, preset: ReproducePreset, rec: dict[str, Any]) -> None:
+        s = rec["spec"]
+        by_cell.setdefault((label, s["env_id"], s["method"], s["noise_std"]),
+                           (preset, []))[1].append(rec)
+
     for rec in records:
         s = rec["spec"]
-        preset = pools.get(str(s.get("preset", "")).split("+", 1)[0])
-        if preset is not None and s["method"] not in REFERENCE_METHODS:
-            by_cell.setdefault((s["preset"], s["env_id"], s["method"], s["noise_std"]),
-                               []).append(rec)
-    replaced: dict[int, dict[str, Any] | None] = {}
-    for (label, *_), trainings in by_cell.items():
-        preset = pools[label.split("+", 1)[0]]
+        if s["method"] in REFERENCE_METHODS:
+            continue
+        filed = str(s.get("preset", ""))
+        preset = own_pools.get(filed.split("+", 1)[0])
+        if preset is not None:
+            pool(filed, preset, rec)
+        for chooser in spare_presets:
+            if chooser.candidates_preset is None or s["env_id"] not in chooser.envs or not (
+                    filed == chooser.runs_preset or filed.startswith(chooser.runs_preset + "+")):
+                continue
+            overrides = filed[len(chooser.runs_preset):]
+            if overrides or _is_training_of(s, chooser):
+                pool(chooser.name + overrides, chooser,
+                     {**rec, "spec": {**s, "preset": chooser.name + overrides}})
+                if int(s["seed"]) >= chooser.num_models:  # a spare, not a model of its own row
+                    replaced[id(rec)] = None
+
+    added: list[dict[str, Any]] = []
+    for preset, trainings in by_cell.values():
         by_seed = {int(r["spec"]["seed"]): r for r in trainings}
         expected = sorted(by_seed)
+        if preset.candidates_preset is not None and expected[-1] < preset.num_models:
+            continue  # none of its spares has run: the other preset's row says it all
         keep = len(expected) - preset.spare_trainings
         if keep < 1 or any("validation" not in r for r in trainings):
+            if preset.candidates_preset is not None:
+                added.extend(by_seed[seed] for seed in expected)
             continue
 
         kept_seeds = sorted(expected, key=lambda seed: _validation_rank(by_seed[seed]))[:keep]
@@ -249,14 +280,17 @@ def kept_trainings(
         }
         for seed in expected:
             record = by_seed[seed]
-            replaced[id(record)] = ({**record, "selection": selection}
-                                    if seed in kept_seeds else None)
+            chosen = {**record, "selection": selection} if seed in kept_seeds else None
+            if preset.candidates_preset is None:
+                replaced[id(record)] = chosen
+            elif chosen is not None:
+                added.append(chosen)
     kept = []
     for rec in records:
         new = replaced.get(id(rec), rec)
         if new is not None:
             kept.append(new)
-    return kept
+    return kept + added
 
 
 def _validation_rank(record: dict[str, Any]) -> tuple[float, float, int]:

@@ -256,7 +256,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if noise_stds:
             changes["noise_levels"] = tuple(noise_stds)
             changes["env_noise_levels"] = {}
-        preset = preset.override(**changes)
+        try:
+            preset = preset.override(**changes)
+        except ValueError as error:
+            raise SystemExit(str(error)) from None
         runs = expand_grid(preset, include_oracle=not args.no_oracle, include_floor=args.floor)
         if args.references_only:
             runs = [run for run in runs if run.method in REFERENCE_METHODS]
@@ -283,7 +286,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 130
     write_summary(results_dir)
     if not args.aggregate_only:
-        show_control(runs, results_dir)
+        show_control(runs, results_dir, preset.name)
     return 0
 
 

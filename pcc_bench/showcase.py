@@ -22,13 +22,18 @@ from pcc_bench.weights import saved_agent_path
 MAX_MODELS_SHOWN = 5
 
 
-def selection_lines(cell: dict[str, dict[int, dict[str, Any]]]) -> list[str]:
-    """One line per method whose trainings were chosen among (spare trainings): which, and why."""
+def selection_lines(cell: dict[str, dict[int, dict[str, Any]]], preset: str) -> list[str]:
+    """One line per method whose trainings ``preset`` chose among (spare trainings): which, why.
+
+    ``preset`` is the label of the rows the grid makes (with its overrides): another
+    preset's choice among the same runs is not shown.
+    """
     from pcc_bench.aggregation import kept_trainings
 
     lines = []
     for method, by_seed in sorted(cell.items()):
-        chosen = [r for r in kept_trainings(list(by_seed.values())) if "selection" in r]
+        chosen = [r for r in kept_trainings(list(by_seed.values()))
+                  if "selection" in r and r["spec"]["preset"] == preset]
         if not chosen:
             continue
         trainings = chosen[0]["selection"]["trainings"]
@@ -66,8 +71,11 @@ def per_task_table(cell: dict[str, dict[int, dict[str, Any]]]) -> str:
     return "\n".join(lines)
 
 
-def show_control(runs: Sequence[Any], results_dir: Path) -> list[Path]:
-    """Print per-task tables and draw the best model's episode of each cell; return the PNGs."""
+def show_control(runs: Sequence[Any], results_dir: Path, preset: str) -> list[Path]:
+    """Print per-task tables and draw the best model's episode of each cell; return the PNGs.
+
+    ``preset``: the label of the grid's rows, whose choice among spare trainings is shown.
+    """
     cells: dict[tuple[str, float], dict[str, dict[int, dict[str, Any]]]] = {}
     specs: dict[tuple[str, float, str, int], Any] = {}
     for spec in runs:
@@ -84,7 +92,7 @@ def show_control(runs: Sequence[Any], results_dir: Path) -> list[Path]:
             continue
         print(f"\n{env_id} (noise {noise:g}): % of steps in goal per task")
         print(per_task_table(cell))
-        for line in selection_lines(cell):
+        for line in selection_lines(cell, preset):
             print(line)
         for method, by_seed in sorted(cell.items()):
             if method in REFERENCE_METHODS:

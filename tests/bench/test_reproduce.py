@@ -1018,7 +1018,7 @@ def test_spare_trainings_keep_the_models_that_control_best_on_validation_tasks()
     (row,) = aggregate(choose_models(records))
     assert row["seeds"] == [0, 1, 3] and row["n_models"] == row["n_models_planned"] == 3
     assert row["mean_all"] == pytest.approx((75.0 + 66.0 + 50.0) / 3)
-    line = selection_lines({"pcc": {r["spec"]["seed"]: r for r in records}})[0]
+    line = selection_lines({"pcc": {r["spec"]["seed"]: r for r in records}}, "quick")[0]
     assert "the 3 of 4 trainings" in line and "#2 0.0 (left out)" in line
     # The worst of the trainings done so far is left out (a reduced grid); with no more
     # trainings than spares, or a training without a validation score, none is.
@@ -1036,6 +1036,53 @@ def test_spare_trainings_keep_the_models_that_control_best_on_validation_tasks()
     assert quick.replace(model_seeds=(5,)).seeds() == (5,)
     with pytest.raises(ValueError, match="not both"):
         quick.replace(restarts=2)
+
+
+def test_a_spare_preset_chooses_among_another_presets_runs_and_leaves_their_rows():
+    from pcc_bench.aggregation import choose_models
+    from pcc_bench.grid import expand_grid
+    from pcc_bench.presets import CONTROL_SELECTION_TASKS, REPRODUCE_PRESETS
+    from pcc_bench.reproduce import main
+    from pcc_bench.tables import settings_table
+
+    spare = REPRODUCE_PRESETS["paper-motion-spare2"].override(keep_best_control_every=5)
+    assert spare.name == "paper-motion-spare2+keep_best_control_every=5"
+    assert spare.runs_preset == "paper-motion+keep_best_control_every=5"
+    # Its 12 trainings are filed (and specified) exactly as paper-motion's with the same
+    # override, so the 10 that exist are reused.
+    own = REPRODUCE_PRESETS["paper-motion"].override(keep_best_control_every=5,
+                                                     envs=spare.envs)
+    trainings = [r for r in expand_grid(spare, include_oracle=False) if r.method == "pcc"]
+    assert [r.seed for r in trainings] == list(range(12))
+    assert trainings[:10] == [r for r in expand_grid(own, include_oracle=False)
+                              if r.method == "pcc"]
+    assert {r.validation_tasks for r in trainings} == {CONTROL_SELECTION_TASKS}
+    # Without validation scores to choose by it refuses to run.
+    with pytest.raises(ValueError, match="--keep-best-control"):
+        REPRODUCE_PRESETS["paper-motion-spare2"].override(max_epochs=3)
+    with pytest.raises(SystemExit, match="no validation tasks"):
+        main(["--preset", "paper-motion-spare2", "--status"])
+
+    def rec(seed, validation):
+        return {"spec": {"env_id": "pcc/CartPole-v1", "method": "pcc", "noise_std": 0.0,
+                         "preset": spare.runs_preset, "seed": seed, "model_variant": "motion"},
+                "training": {"best_validation_loss": 100.0}, "percentages": [validation],
+                "validation": {"mean": validation}, "mean": validation, "train_seconds": 1.0}
+
+    # Seeds 3 and 7 control worst on validation: the spare row leaves them out; the
+    # paper-motion row keeps its 10 models, without the spares.
+    records = [rec(seed, 10.0 if seed in (3, 7) else 50.0 + seed) for seed in range(12)]
+    rows = {row["preset"]: row for row in aggregate(choose_models(records))}
+    assert rows[spare.runs_preset]["seeds"] == list(range(10))
+    chosen = rows[spare.name]
+    assert chosen["seeds"] == [0, 1, 2, 4, 5, 6, 8, 9, 10, 11]
+    assert chosen["n_models"] == chosen["n_models_planned"] == 10
+    assert "the 10 of 12 trainings that control best" in settings_table([chosen])
+    # Before a spare has run, or in another env, there is no spare row.
+    rows = {row["preset"] for row in aggregate(choose_models(records[:10]))}
+    assert rows == {spare.runs_preset}
+    elsewhere = [{**r, "spec": {**r["spec"], "env_id": "pcc/ThreeLink-v1"}} for r in records]
+    assert {row["preset"] for row in aggregate(choose_models(elsewhere))} == {spare.runs_preset}
 
 
 def test_a_run_with_validation_tasks_records_its_validation_control(tmp_path):
