@@ -10,6 +10,10 @@ does not depend on image content).
 ``--prediction-horizon K`` times training with the multi-step prediction term over ``K`` steps
 (data hold ``K`` consecutive transitions; rows carry ``prediction_horizon``).
 
+``--mixed-precision bf16`` (or ``auto``: only where the CPU has AMX or AVX512-BF16) times the
+bfloat16-autocast variant (rows carry ``mixed_precision`` and ``bf16_autocast``; and
+``flush_denormals``, the preset's, on by default).
+
 ``--converge`` instead trains PCC on Planar with the paper's settings (validation split, early
 stopping) and reports the epochs and wall time until early stopping.
 
@@ -40,13 +44,20 @@ from typing import Any
 import numpy as np
 import torch
 
+from pcc_agent.config import MIXED_PRECISION_MODES
 from pcc_agent.io import atomic_write_text
 from pcc_agent.losses import METHODS, model_config_for_method
 from pcc_agent.model import EmbeddingModel
 from pcc_agent.presets import ACTION_DIMS, OBS_SHAPES, PRESETS, VARIANTS, get_preset
-from pcc_agent.training import TransitionArrays, resolve_device, train_embedding
+from pcc_agent.training import (
+    TransitionArrays,
+    resolve_device,
+    train_embedding,
+    uses_bf16_autocast,
+)
 from pcc_bench.arguments import command_parser
 from pcc_bench.paths import COMMITTED_RESULTS_DIR
+from pcc_bench.records import cpu_name
 
 DEFAULT_OUTPUT = COMMITTED_RESULTS_DIR / "train_speed.json"
 PLANAR = "pcc/Planar-v0"
@@ -119,7 +130,8 @@ def measure(env_id: str, variant: str, method: str, args: argparse.Namespace) ->
     config = model_config_for_method(preset.model, method)
     model = EmbeddingModel(OBS_SHAPES[env_id], ACTION_DIMS[env_id], config, seed=args.seed)
     train = dataclasses.replace(preset.train, epochs=args.epochs + 1, validation_fraction=0.0,
-                                patience=0, seed=args.seed, prediction_horizon=horizon)
+                                patience=0, seed=args.seed, prediction_horizon=horizon,
+                                mixed_precision=args.mixed_precision)
     result = train_embedding(model, data, train, method=method, device=args.device,
                              progress_bar=False)
     if result.diverged:
@@ -133,6 +145,9 @@ def measure(env_id: str, variant: str, method: str, args: argparse.Namespace) ->
         "device": str(resolve_device(args.device)), "threads": torch.get_num_threads(),
         "num_samples": num_samples, "batch_size": train.batch_size,
         "timed_epochs": len(times), "data": source, "prediction_horizon": horizon,
+        "mixed_precision": args.mixed_precision,
+        "bf16_autocast": uses_bf16_autocast(args.mixed_precision, resolve_device(args.device)),
+        "flush_denormals": train.flush_denormals, "cpu": cpu_name(),
         "parameters": sum(p.numel() for p in model.parameters()),
     }
 
@@ -177,6 +192,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser.add_argument("--prediction-horizon", type=int, default=1, metavar="K",
                         help="train with the multi-step prediction term over K steps (1: the "
                              "paper's one-step objective)")
+    parser.add_argument("--mixed-precision", default="off", choices=MIXED_PRECISION_MODES,
+                        help="bfloat16 autocast: off (float32, the default), bf16, or auto "
+                             "(only where the hardware multiplies bfloat16)")
     parser.add_argument("--real-data", action="store_true", help="use pcc_envs.data")
     parser.add_argument("--converge", action="store_true",
                         help="train Planar PCC to early stopping instead")
@@ -186,7 +204,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
     parser.add_argument("--append", action="store_true",
                         help="merge into the output file (rows with the same env, method, "
-                             "variant, mode, threads and prediction horizon are replaced)")
+                             "variant, mode, threads, prediction horizon and mixed precision "
+                             "are replaced)")
     args = parser.parse_args(argv)
     if args.prediction_horizon < 1:
         parser.error(f"--prediction-horizon must be at least 1, got {args.prediction_horizon}")
@@ -213,7 +232,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     if args.append and args.output.exists():
         def key(row: dict[str, Any]) -> tuple:
             return (row["env"], row["method"], row["variant"], row.get("mode", "epoch"),
-                    row["threads"], row.get("prediction_horizon", 1))
+                    row["threads"], row.get("prediction_horizon", 1),
+                    row.get("mixed_precision", "off"))
 
         new_keys = {key(row) for row in rows}
         old = [row for row in json.loads(args.output.read_text()) if key(row) not in new_keys]

@@ -43,3 +43,18 @@ def test_a_prediction_horizon_below_one_is_refused(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--prediction-horizon", "0", "--output", str(tmp_path / "speed.json")])
     assert "--prediction-horizon must be at least 1, got 0" in capsys.readouterr().err
+
+
+def test_a_bfloat16_row_says_whether_autocast_ran(tmp_path):
+    from pcc_agent.training import native_bf16
+
+    output = tmp_path / "speed.json"
+    args = ["--envs", "pcc/Planar-v0", "--variants", "fast", "--max-samples", "64",
+            "--epochs", "1", "--threads", "1", "--output", str(output)]
+    (row,) = main([*args, "--mixed-precision", "auto"])
+    assert row["mixed_precision"] == "auto" and row["bf16_autocast"] == native_bf16("cpu")
+    assert row["flush_denormals"] is True and row["cpu"]
+    # --append keeps float32 and bfloat16 rows apart.
+    main([*args, "--append"])
+    rows = json.loads(output.read_text())
+    assert sorted(row["mixed_precision"] for row in rows) == ["auto", "off"]
