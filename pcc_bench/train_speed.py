@@ -204,8 +204,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
     parser.add_argument("--append", action="store_true",
                         help="merge into the output file (rows with the same env, method, "
-                             "variant, mode, threads, prediction horizon and mixed precision "
-                             "are replaced)")
+                             "variant, mode, threads, prediction horizon, mixed precision and "
+                             "CPU are replaced)")
     args = parser.parse_args(argv)
     if args.prediction_horizon < 1:
         parser.error(f"--prediction-horizon must be at least 1, got {args.prediction_horizon}")
@@ -233,7 +233,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         def key(row: dict[str, Any]) -> tuple:
             return (row["env"], row["method"], row["variant"], row.get("mode", "epoch"),
                     row["threads"], row.get("prediction_horizon", 1),
-                    row.get("mixed_precision", "off"))
+                    row.get("mixed_precision", "off"), row.get("cpu"))
 
         new_keys = {key(row) for row in rows}
         old = [row for row in json.loads(args.output.read_text()) if key(row) not in new_keys]
