@@ -261,6 +261,14 @@ _PAPER = ReproducePreset(
     model_variant="paper",
 )
 _PAPER_FAST = _PAPER.replace(name="paper-fast", model_variant="fast")
+# The CNN domains with the "motion" variant: the fast CNN run on each frame, seeing the
+# change of its features between the two frames, and a decoder with one logit per pixel
+# (pcc_agent.presets._motion_cnn_model, not the paper's). Chosen because the fast CNN's
+# code never held CartPole's rates; judged on state R^2 and validation tasks.
+_PAPER_MOTION = _PAPER.replace(
+    name="paper-motion", model_variant="motion",
+    envs=("pcc/CartPole-v1", "pcc/TwoLink-v0", "pcc/ThreeLink-v0", "pcc/ThreeLink-v1",
+          "pcc/LaneKeeping-v0"))
 
 REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
     # The README's main job: about ten minutes on 2 CPU cores, Planar, 3 PCC models x 10 tasks.
@@ -284,22 +292,17 @@ REPRODUCE_PRESETS: dict[str, ReproducePreset] = {
         spare_trainings=1,
     ),
     "paper": _PAPER,
-    # The CNN domains with the "motion" variant: the fast CNN run on each frame, seeing the
-    # change of its features between the two frames, and a decoder with one logit per pixel
-    # (pcc_agent.presets._motion_cnn_model, not the paper's). Chosen because the fast CNN's
-    # code never held CartPole's rates; judged on state R^2 and validation tasks.
-    "paper-motion": _PAPER.replace(
-        name="paper-motion", model_variant="motion",
-        envs=("pcc/CartPole-v1", "pcc/TwoLink-v0", "pcc/ThreeLink-v0", "pcc/ThreeLink-v1",
-              "pcc/LaneKeeping-v0")),
-    # "paper-motion" with 2 spare trainings per row: the 10 of 12 trainings that control best
-    # on validation tasks (task seed 2021) make the row. Its trainings are paper-motion's runs
-    # (seeds 0-11, the same overrides), so the first 10 are reused and that row stays as it
-    # is. Needs --keep-best-control (the trainings' validation scores). Why: 2 of CartPole-v1's
-    # 10 five-step trainings scored 27-31 % on validation tasks against 50-98 for the others.
-    "paper-motion-spare2": _PAPER.replace(
-        name="paper-motion-spare2", model_variant="motion", envs=("pcc/CartPole-v1",),
-        spare_trainings=2, candidates_preset="paper-motion"),
+    "paper-motion": _PAPER_MOTION,
+    # "paper" and "paper-motion" with 2 spare trainings per row: the 10 of 12 trainings that
+    # control best on validation tasks (task seed 2021) make the row. Their trainings are the
+    # base preset's runs (seeds 0-11, the same overrides), so the first 10 are reused and the
+    # base row stays as it is. Need --keep-best-control (the trainings' validation scores).
+    # Why: 2 of CartPole-v1's 10 five-step trainings scored 27-31 % on validation tasks
+    # against 50-98 for the others; 1 of the balance row's 10 scored 33 against 81-100.
+    "paper-spare2": _PAPER.replace(name="paper-spare2", spare_trainings=2,
+                                   candidates_preset="paper"),
+    "paper-motion-spare2": _PAPER_MOTION.replace(name="paper-motion-spare2", spare_trainings=2,
+                                                 candidates_preset="paper-motion"),
     # The same protocol with the CPU-friendly CNNs for CartPole, the arms and LaneKeeping.
     "paper-fast": _PAPER_FAST,
     # "paper-fast" with a longer early-stopping criterion: 100 epochs without improvement, at

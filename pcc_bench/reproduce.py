@@ -272,7 +272,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      max(1, args.workers), args.backend)))
         if args.status:
             return 0
-        if preset.name != args.preset:
+        if preset.runs_preset != preset.name:
+            print(f"Its trainings are filed as {preset.runs_preset!r}'s runs; its rows are "
+                  f"labelled {preset.name!r}.")
+        elif preset.name != args.preset:
             print(f"The overrides change what the runs compute: their files and rows are "
                   f"labelled {preset.name!r}.")
         # SIGTERM (kill, a batch scheduler's stop) ends the grid like Ctrl-C does.
