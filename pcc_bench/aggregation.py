@@ -226,8 +226,8 @@ def kept_trainings(
     (filed under ``runs_preset``, or ``runs_preset + "+..."`` with overrides): those records
     pass unchanged, for their own rows (but for the spares, seeds ``num_models`` onwards,
     which that preset's rows never had), and the kept ones are added again as copies filed
-    under the choosing preset (``name``, or ``name + "+..."``), for the cells of its envs
-    where at least one spare has run.
+    under the choosing preset (``name``, or ``name + "+..."``), for the cells where at least
+    one spare has run (in any env: a grid may be run with ``--envs`` beyond the preset's).
     """
     spare_presets = [preset for preset in presets if preset.spare_trainings]
     replaced: dict[int, dict[str, Any] | None] = {}
@@ -248,7 +248,7 @@ def kept_trainings(
         if preset is not None:
             pool(filed, preset, rec)
         for chooser in spare_presets:
-            if chooser.candidates_preset is None or s["env_id"] not in chooser.envs or not (
+            if chooser.candidates_preset is None or not (
                     filed == chooser.runs_preset or filed.startswith(chooser.runs_preset + "+")):
                 continue
             overrides = filed[len(chooser.runs_preset):]

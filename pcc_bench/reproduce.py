@@ -273,8 +273,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.status:
             return 0
         if preset.runs_preset != preset.name:
-            print(f"Its trainings are filed as {preset.runs_preset!r}'s runs; its rows are "
-                  f"labelled {preset.name!r}.")
+            print(f"Its trainings are filed under {preset.runs_preset!r}, as that preset's "
+                  f"runs; its rows are labelled {preset.name!r}.")
         elif preset.name != args.preset:
             print(f"The overrides change what the runs compute: their files and rows are "
                   f"labelled {preset.name!r}.")

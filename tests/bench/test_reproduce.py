@@ -1079,9 +1079,14 @@ def test_a_spare_preset_chooses_among_another_presets_runs_and_leaves_their_rows
     assert chosen["seeds"] == [0, 1, 2, 4, 5, 6, 8, 9, 10, 11]
     assert chosen["n_models"] == chosen["n_models_planned"] == 10
     assert "the 10 of 12 trainings that control best" in settings_table([chosen])
-    # Before a spare has run there is no spare row.
+    # Before a spare has run there is no spare row; an env run beyond the preset's has one.
     rows = {row["preset"] for row in aggregate(choose_models(records[:10]))}
     assert rows == {spare.runs_preset}
+    assert "pcc/PendulumBalance-v0" not in spare.envs
+    elsewhere = [{**r, "spec": {**r["spec"], "env_id": "pcc/PendulumBalance-v0"}}
+                 for r in records]
+    rows = {row["preset"]: row for row in aggregate(choose_models(elsewhere))}
+    assert rows[spare.name]["seeds"] == chosen["seeds"]
 
 
 def test_a_run_with_validation_tasks_records_its_validation_control(tmp_path):
