@@ -162,12 +162,8 @@ def select_restarts(
         by_cell: dict[tuple[Any, ...], dict[int, dict[str, Any]]] = {}
         for rec in records:
             s = rec["spec"]
-            filed = str(s.get("preset", ""))
-            if s["method"] in REFERENCE_METHODS or not (
-                    filed == preset.runs_preset or filed.startswith(preset.runs_preset + "+")):
-                continue
-            overrides = filed[len(preset.runs_preset):]
-            if not overrides and not _is_training_of(s, preset):
+            overrides = _overrides_as_training_of(s, preset)
+            if s["method"] in REFERENCE_METHODS or overrides is None:
                 continue
             training = s["seed"] // RESTART_SEED_STRIDE
             if training >= preset.restarts:  # a training of a preset with more restarts
@@ -248,15 +244,14 @@ def kept_trainings(
         if preset is not None:
             pool(filed, preset, rec)
         for chooser in spare_presets:
-            if chooser.candidates_preset is None or not (
-                    filed == chooser.runs_preset or filed.startswith(chooser.runs_preset + "+")):
+            overrides = (None if chooser.candidates_preset is None
+                         else _overrides_as_training_of(s, chooser))
+            if overrides is None:
                 continue
-            overrides = filed[len(chooser.runs_preset):]
-            if overrides or _is_training_of(s, chooser):
-                pool(chooser.name + overrides, chooser,
-                     {**rec, "spec": {**s, "preset": chooser.name + overrides}})
-                if int(s["seed"]) >= chooser.num_models:  # a spare, not a model of its own row
-                    replaced[id(rec)] = None
+            pool(chooser.name + overrides, chooser,
+                 {**rec, "spec": {**s, "preset": chooser.name + overrides}})
+            if int(s["seed"]) >= chooser.num_models:  # a spare, not a model of its own row
+                replaced[id(rec)] = None
 
     added: list[dict[str, Any]] = []
     for preset, trainings in by_cell.values():
@@ -298,6 +293,20 @@ def _validation_rank(record: dict[str, Any]) -> tuple[float, float, int]:
     loss = record.get("training", {}).get("best_validation_loss")
     return (-float(record["validation"]["mean"]), math.inf if loss is None else float(loss),
             int(record["spec"]["seed"]))
+
+
+def _overrides_as_training_of(spec: dict[str, Any], preset: ReproducePreset) -> str | None:
+    """The overrides (``""`` or ``"+..."``) under which a run is a training of ``preset``.
+
+    None when the run is filed under another preset than ``preset.runs_preset``, or under
+    it without overrides but with another recipe.
+    """
+    filed = str(spec.get("preset", ""))
+    runs = preset.runs_preset
+    if filed != runs and not filed.startswith(runs + "+"):
+        return None
+    overrides = filed[len(runs):]
+    return overrides if overrides or _is_training_of(spec, preset) else None
 
 
 def _is_training_of(spec: dict[str, Any], preset: ReproducePreset) -> bool:
